@@ -1,0 +1,24 @@
+"""symvi — a compiler for structure-preserving integrators on Lie groupoids.
+
+Declare a groupoid and a Lagrangian with SymPy (:class:`Model`), compile it to a C
+extension (:func:`compile_model`, or ``symvi compile`` on the command line) and integrate
+with the generated module, which needs numpy and cffi only.
+"""
+__version__ = "0.1.0"
+
+from .errors import BuildError, CompilerNotFoundError, ModelError, SymviError  # noqa: E402
+from .groupoids import Groupoid, PairGroupoid  # noqa: E402
+from .model import Example, Model, h  # noqa: E402
+
+
+def compile_model(model, out_dir="generated", *, force=False, verbose=False):
+    """Derive, emit and build ``model``; return the imported generated module.
+
+    See :func:`symvi.build.compile_model`.
+    """
+    from .build import compile_model as _compile
+    return _compile(model, out_dir, force=force, verbose=verbose)
+
+
+__all__ = ["Model", "Example", "PairGroupoid", "Groupoid", "h", "compile_model",
+           "ModelError", "BuildError", "CompilerNotFoundError", "SymviError", "__version__"]

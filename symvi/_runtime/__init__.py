@@ -1,0 +1,10 @@
+"""Run-time support copied into every generated package.
+
+Depends on numpy (and cffi through the extension) only; SciPy is imported lazily by the
+whole-trajectory solver. Never imports SymPy or symvi.
+"""
+from .compiled import CompiledModel
+from .errors import NewtonError
+from .results import BVPResult, Status, StepResult
+
+__all__ = ["CompiledModel", "NewtonError", "StepResult", "BVPResult", "Status"]

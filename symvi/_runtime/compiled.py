@@ -1,0 +1,114 @@
+"""The Python face of a compiled model: kernels, the step map and the whole-trajectory solve."""
+from __future__ import annotations
+
+from typing import Mapping
+
+import numpy as np
+
+from . import arguments
+from .bvp import solve_bvp
+from .stepping import integrate
+
+
+class CompiledModel:
+    """Wraps the cffi ``ffi``/``lib`` of one generated extension.
+
+    ``info`` is the metadata written by symvi: name, kind, order, source_dim (m),
+    fibre_dim (n), parameters, defaults, kernels (name → z length and output sizes),
+    has_energy, bvp.
+    """
+
+    def __init__(self, ffi, lib, info: Mapping):
+        self.ffi, self.lib, self.info = ffi, lib, dict(info)
+        self.name: str = info["name"]
+        self.order: int = info["order"]
+        self.m: int = info["source_dim"]
+        self.n: int = info["fibre_dim"]
+        self.parameter_names: tuple[str, ...] = tuple(info["parameters"])
+        self.parameter_defaults: tuple[float, ...] = tuple(info["defaults"])
+
+    def __repr__(self) -> str:
+        return (f"<symvi model {self.name!r}: {self.info['kind']} groupoid, order {self.order}, "
+                f"n={self.n}, parameters {dict(zip(self.parameter_names, self.parameter_defaults))}>")
+
+    @property
+    def stencil_elements(self) -> int:
+        """K = 2r elements in the stencil of one residual."""
+        return 2 * self.order
+
+    def ptr(self, array: np.ndarray):
+        """A ``double *`` on a C-contiguous float64 array, without copying."""
+        return self.ffi.from_buffer("double[]", array)
+
+    def params(self, given=None) -> np.ndarray:
+        return arguments.parameters(self.parameter_names, self.parameter_defaults, given)
+
+    def evaluate(self, kernel: str, z, h: float, params=None) -> tuple[np.ndarray, ...]:
+        """Evaluate one compiled kernel at stencil coordinates ``z``.
+
+        Kernels: ``step`` (residual, ∂R/∂f_{K−1}), ``stencil`` (residual, ∂R/∂z),
+        ``predict``, ``target``, ``momentum_plus``, ``momentum_minus``, ``lagrangian`` and,
+        for first-order models, ``energy``. Returns the outputs as arrays (Jacobians as
+        matrices).
+        """
+        spec = self.info["kernels"].get(kernel)
+        if spec is None:
+            raise ValueError(f"unknown kernel {kernel!r}; known: {sorted(self.info['kernels'])}")
+        z = arguments.finite_array(z, (spec["nz"],), f"stencil z of kernel {kernel!r}")
+        p, h = self.params(params), arguments.step_size(h)
+        outs = [np.zeros(size) for size in spec["outputs"]]
+        getattr(self.lib, f"symvi_{kernel}")(self.ptr(z), self.ptr(p), h,
+                                             *[self.ptr(o) for o in outs])
+        if len(outs) == 2:
+            outs[1] = outs[1].reshape(outs[0].size, -1)
+        return tuple(outs)
+
+    def along(self, kernel: str, x: np.ndarray, f: np.ndarray, h: float, params=None,
+              windows: int | None = None) -> np.ndarray:
+        """Evaluate a single-output kernel on every window of consecutive elements."""
+        spec = self.info["kernels"][kernel]
+        width = (spec["nz"] - self.m) // self.n
+        available = f.shape[0] - width + 1
+        windows = available if windows is None else windows
+        out = np.zeros((max(windows, 0), spec["outputs"][0]))
+        if windows > 0:
+            x = np.ascontiguousarray(x, dtype=np.float64)
+            f = np.ascontiguousarray(f, dtype=np.float64)
+            getattr(self.lib, f"symvi_{kernel}_path")(self.ptr(x), self.ptr(f), windows,
+                                                      self.ptr(self.params(params)),
+                                                      arguments.step_size(h), self.ptr(out))
+        return out
+
+    def momenta(self, x: np.ndarray, f: np.ndarray, h: float, params=None) -> np.ndarray:
+        """Discrete momenta at every state of a path (see :class:`StepResult`).
+
+        F⁻L_d on windows 0 … r−1 gives states 0 … r−1; F⁺L_d on window i gives state i + r.
+        """
+        r, n = self.order, self.n
+        if f.shape[0] - (2 * r - 1) + 1 < r:
+            return np.zeros((0, n) if r == 1 else (0, r, n))
+        minus = self.along("momentum_minus", x, f, h, params, windows=r).reshape(-1, r, n)
+        plus = self.along("momentum_plus", x, f, h, params).reshape(-1, r, n)
+        states = np.concatenate([minus, plus])
+        return states[:, 0, :] if r == 1 else states
+
+    def integrate(self, initial, n_steps: int, h: float, params=None, **options):
+        """Step the discrete Euler–Lagrange equations; see :func:`stepping.integrate`."""
+        return integrate(self, initial, n_steps, h, params, **options)
+
+    def solve_bvp(self, start, end, n_steps: int, h: float, params=None, **options):
+        """Whole-trajectory solve with fixed end nodes; see :func:`bvp.solve_bvp`."""
+        return solve_bvp(self, start, end, n_steps, h, params, **options)
+
+    def initial_stencil(self, initial) -> np.ndarray:
+        """Flatten initial data to the stencil prefix (x_0, f_0, …, f_{K−2})."""
+        K = self.stencil_elements
+        if self.info["kind"] == "pair":
+            nodes = arguments.finite_array(initial, (K, self.n),
+                                           f"initial nodes (the first {K} nodes q_0..q_{K - 1})")
+            return nodes.reshape(-1)
+        x0, fibres = initial
+        x0 = arguments.finite_array(x0, (self.m,), "initial base point")
+        fibres = arguments.finite_array(fibres, (K - 1, self.n), "initial fibre parts")
+        return np.concatenate([x0, fibres.reshape(-1)])
+

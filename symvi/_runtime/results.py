@@ -1,0 +1,91 @@
+"""Result objects of the step map and the whole-trajectory solve (cf. ``solve_ivp``)."""
+from __future__ import annotations
+
+import enum
+from dataclasses import dataclass
+
+import numpy as np
+
+from .errors import NewtonError
+
+
+class Status(enum.IntEnum):
+    """Outcome of a solve; the values match the C return codes."""
+
+    SUCCESS = 0
+    MAX_ITERATIONS = 1
+    SINGULAR_JACOBIAN = 2
+    NON_FINITE = 3
+    STALLED = 4
+
+
+class _Checkable:
+    def raise_for_status(self):
+        """Raise :class:`NewtonError` unless the solve succeeded; return self otherwise."""
+        if not self.success:
+            raise NewtonError(self)
+        return self
+
+
+@dataclass(frozen=True)
+class StepResult(_Checkable):
+    """Discrete path computed by the step map.
+
+    Attributes
+    ----------
+    t : (E+1,) times of the base points (node k at k·h).
+    x : (E+1, m) base points α(E_0), β(E_0), …, β(E_{E−1}); for the pair groupoid the
+        nodes q_k (also available as ``q``).
+    f : (E, n) fibre parts of the elements E_0, …, E_{E−1}.
+    momenta : discrete Legendre transforms at each state: (E+1, n) for first order
+        (p_0 from F⁻L_d, p_k for k ≥ 1 from F⁺L_d), (E, 2, n) for second order (state k
+        is the node pair (ν_k, ν_{k+1}); states 0, 1 from F⁻L_d, the rest from F⁺L_d).
+    energy : (E,) discrete energy −∂L_d/∂h per element (first-order models), else None.
+    newton_iterations : (steps,) Newton iterations of each computed step.
+    status, success, message : outcome; on failure the arrays hold the path up to the
+        failing step.
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    f: np.ndarray
+    momenta: np.ndarray
+    energy: np.ndarray | None
+    newton_iterations: np.ndarray
+    status: Status
+    message: str
+
+    @property
+    def success(self) -> bool:
+        return self.status == Status.SUCCESS
+
+    @property
+    def q(self) -> np.ndarray:
+        """Alias of ``x`` (the nodes of a pair-groupoid path)."""
+        return self.x
+
+
+@dataclass(frozen=True)
+class BVPResult(_Checkable):
+    """Whole-trajectory solution with fixed end nodes.
+
+    Attributes
+    ----------
+    t, q : (N+1,) times and (N+1, n) nodes, boundary nodes included.
+    iterations : Newton iterations taken.
+    residual_norms : max-norm of the residual before each iteration and at the end.
+    step_norms : max-norm of each Newton update actually taken (after line search).
+    status, success, message : outcome.
+    """
+
+    t: np.ndarray
+    q: np.ndarray
+    iterations: int
+    residual_norms: np.ndarray
+    step_norms: np.ndarray
+    status: Status
+    message: str
+
+    @property
+    def success(self) -> bool:
+        return self.status == Status.SUCCESS

@@ -1,0 +1,58 @@
+"""The step map: one call into the C loop integrates every step (Newton per step in C)."""
+from __future__ import annotations
+
+import numpy as np
+
+from . import arguments
+from .results import Status, StepResult
+
+_FAILURE = {
+    Status.MAX_ITERATIONS: "Newton's method did not converge in {maxiter} iterations",
+    Status.SINGULAR_JACOBIAN: "the step Jacobian is singular",
+    Status.NON_FINITE: "the residual or the update became non-finite (NaN or inf)",
+}
+
+
+def integrate(model, initial, n_steps: int, h: float, params=None, *, maxiter: int = 50,
+              xtol: float = 1e-12, ftol: float = 0.0,
+              raise_on_failure: bool = False) -> StepResult:
+    """Integrate ``n_steps`` steps of the discrete Euler–Lagrange equations.
+
+    Parameters
+    ----------
+    model : the :class:`CompiledModel`.
+    initial : the first K−1 elements. Pair groupoid: the first 2r nodes q_0, …, q_{2r−1}
+        as an array (2r, n) (r the order). Other groupoids: ``(x_0, fibres)``.
+    n_steps : number of new elements to compute.
+    h : time step (> 0). params : parameter overrides (mapping name → value).
+    maxiter, xtol, ftol : Newton stops when ‖Δf‖∞ ≤ xtol·(1 + ‖f‖∞) or ‖R‖∞ ≤ ftol.
+    raise_on_failure : raise :class:`NewtonError` instead of returning a failed result.
+    """
+    n_steps = arguments.count(n_steps, "n_steps")
+    h = arguments.step_size(h)
+    maxiter = arguments.count(maxiter, "maxiter", 1)
+    xtol, ftol = arguments.tolerance(xtol, "xtol"), arguments.tolerance(ftol, "ftol")
+    z0, p = model.initial_stencil(initial), model.params(params)
+    K, m, n = model.stencil_elements, model.m, model.n
+    elements = K - 1 + n_steps
+    x = np.zeros((elements + 1, m))
+    f = np.zeros((elements, n))
+    iters = np.zeros(max(n_steps, 1), dtype=np.intc)
+    done, rnorm = model.ffi.new("long *"), model.ffi.new("double *")
+    code = model.lib.symvi_integrate(model.ptr(z0), n_steps, model.ptr(p), h, maxiter, xtol, ftol,
+                                     model.ptr(x), model.ptr(f),
+                                     model.ffi.from_buffer("int[]", iters), done, rnorm)
+    status, steps = Status(code), int(done[0])
+    if status == Status.SUCCESS:
+        message = f"integrated {n_steps} steps"
+    else:
+        reason = _FAILURE[status].format(maxiter=maxiter)
+        message = (f"step {steps} (t = {(K - 1 + steps) * h:.6g}) failed: {reason}; "
+                   f"residual norm {rnorm[0]:.3e}")
+        x, f = x[: K + steps], f[: K - 1 + steps]
+    result = StepResult(t=h * np.arange(x.shape[0]), x=x, f=f,
+                        momenta=model.momenta(x, f, h, params),
+                        energy=(model.along("energy", x, f, h, params)[:, 0]
+                                if model.info["has_energy"] else None),
+                        newton_iterations=iters[:steps].copy(), status=status, message=message)
+    return result.raise_for_status() if raise_on_failure else result

@@ -1,0 +1,187 @@
+"""Symbolic derivation: discrete Euler–Lagrange residuals, momenta and Jacobians.
+
+One engine for every groupoid (DESIGN.md §2). A discrete path is a sequence of composable
+elements E_0, E_1, … with E_i = (x_i, f_i) and x_{i+1} = β(x_i, f_i). Node ν_j is the
+base point shared by E_{j−1} and E_j. Hamilton's principle varies ν_j by
+E_{j−1} → E_{j−1}·σ(ε), E_j → σ(ε)⁻¹·E_j; the variation of the action term
+L_d(E_w, …, E_{w+r−1}) (order r) is ``right(E_{j−1})ᵀ ∇_slot L_d + left(E_j)ᵀ ∇_slot L_d``
+for the slots that hold E_{j−1}, E_j. Summing over the windows that contain ν_j gives the
+discrete Euler–Lagrange residual (paper §2.2 for r = 1; §3.1, eq. ``delelg`` for r = 2).
+
+The same sum over the windows that lie entirely before (after) a node gives the discrete
+Legendre transforms F⁺L_d (−F⁻L_d) — the momenta of Appendix B for r = 1 and of §4.3 for
+r = 2; on a solution the two agree, which is the residual vanishing.
+
+Kernels are described on a *stencil* of K consecutive elements, with coordinates
+z = (x_0, f_0, …, f_{K−1}); later base points are substituted through β.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import sympy as sp
+
+from .discretise import DiscreteModel
+from .errors import ModelError
+
+
+@dataclass(frozen=True)
+class Kernel:
+    """One function to compile: z, parameters and h in; named arrays out.
+
+    ``outputs`` maps names to SymPy matrices (row-major flattening in C).
+    """
+
+    name: str
+    z: tuple[sp.Symbol, ...]
+    outputs: tuple[tuple[str, sp.Matrix], ...]
+    doc: str
+
+
+@dataclass(frozen=True, eq=False)
+class DerivedModel:
+    """Everything the C emitter needs, as data (no reference back to the Model)."""
+
+    name: str
+    kind: str
+    order: int
+    source_dim: int
+    fibre_dim: int
+    parameters: tuple[sp.Symbol, ...]
+    defaults: tuple[float, ...]
+    step: sp.Symbol
+    kernels: tuple[Kernel, ...]
+    nodes_are_unknowns: bool
+    has_energy: bool
+    fingerprint: str
+
+    @property
+    def stencil_elements(self) -> int:
+        """K = 2r: elements in the stencil of one residual."""
+        return 2 * self.order
+
+    def kernel(self, name: str) -> Kernel:
+        return next(k for k in self.kernels if k.name == name)
+
+
+@dataclass(frozen=True)
+class _Stencil:
+    z: tuple[sp.Symbol, ...]
+    xs: tuple[tuple[sp.Expr, ...], ...]
+    fs: tuple[tuple[sp.Symbol, ...], ...]
+
+
+def _stencil(dm: DiscreteModel, elements: int) -> _Stencil:
+    g = dm.groupoid
+    x0 = tuple(sp.Symbol(f"x_{i}", real=True) for i in range(g.source_dim))
+    fs = tuple(tuple(sp.Symbol(f"f{k}_{i}", real=True) for i in range(g.fibre_dim))
+               for k in range(elements))
+    xs = [x0]
+    for k in range(elements - 1):
+        xs.append(tuple(g.target(xs[-1], fs[k])))
+    return _Stencil(x0 + tuple(s for f in fs for s in f), tuple(xs), fs)
+
+
+class _Engine:
+    """Node variations of the action sum of one discrete model."""
+
+    def __init__(self, dm: DiscreteModel):
+        self.dm = dm
+        self.gradients = tuple(
+            sp.Matrix([sp.diff(dm.lagrangian, s) for s in x + f]) for x, f in dm.slots)
+
+    def _window_mapping(self, st: _Stencil, w: int) -> dict:
+        mapping = {}
+        for j, (X, F) in enumerate(self.dm.slots):
+            mapping.update(zip(X, st.xs[w + j]))
+            mapping.update(zip(F, st.fs[w + j]))
+        return mapping
+
+    def variation(self, st: _Stencil, node: int, windows) -> sp.Matrix:
+        """Σ over ``windows`` of d/dε of L_d(window) when node ν_node is varied."""
+        g, r = self.dm.groupoid, self.dm.order
+        total = sp.zeros(g.fibre_dim, 1)
+        for w in windows:
+            mapping = self._window_mapping(st, w)
+            for element, side in ((node - 1, g.right), (node, g.left)):
+                slot = element - w
+                if 0 <= slot < r:
+                    grad = self.gradients[slot].xreplace(mapping)
+                    total += side(st.xs[element], st.fs[element]).T * grad
+        return total
+
+    def lagrangian(self, st: _Stencil, w: int) -> sp.Expr:
+        return self.dm.lagrangian.xreplace(self._window_mapping(st, w))
+
+
+def _stack(vectors) -> sp.Matrix:
+    return sp.Matrix.vstack(*vectors)
+
+
+def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
+    engine, r, n = _Engine(dm), dm.order, dm.groupoid.fibre_dim
+    full = _stencil(dm, 2 * r)
+    residual = engine.variation(full, r, range(r + 1))
+    unknown = full.fs[-1]
+    guess = sp.Matrix(dm.groupoid.predictor(full.xs[:-1], full.fs[:-1]))
+    one = _stencil(dm, 1)
+    half = _stencil(dm, 2 * r - 1)
+    p_plus = _stack([engine.variation(half, j, range(r)) for j in range(r, 2 * r)])
+    p_minus = -_stack([engine.variation(half, j, range(r)) for j in range(r)])
+    window = _stencil(dm, r)
+    kernels = [
+        Kernel("step", full.z, (("residual", residual), ("jacobian", residual.jacobian(unknown))),
+               "discrete Euler–Lagrange residual at the middle node and ∂R/∂f_{K−1}"),
+        Kernel("stencil", full.z, (("residual", residual), ("jacobian", residual.jacobian(full.z))),
+               "residual and its Jacobian with respect to every stencil coordinate"),
+        Kernel("predict", full.z, (("guess", guess),),
+               "explicit guess of f_{K−1} from the earlier elements"),
+        Kernel("target", one.z, (("target", sp.Matrix(dm.groupoid.target(one.xs[0], one.fs[0]))),),
+               "β(x, f)"),
+        Kernel("momentum_plus", half.z, (("momentum", p_plus),),
+               "F⁺L_d: momenta at the last r nodes from the 2r−1 elements before them"),
+        Kernel("momentum_minus", half.z, (("momentum", p_minus),),
+               "F⁻L_d: momenta at the first r nodes from the 2r−1 elements after them"),
+        Kernel("lagrangian", window.z, (("value", sp.Matrix([engine.lagrangian(window, 0)])),),
+               "L_d on one window of r elements"),
+    ]
+    if r == 1:
+        energy = -sp.diff(engine.lagrangian(one, 0), dm.step)
+        kernels.append(Kernel("energy", one.z, (("value", sp.Matrix([energy])),),
+                              "discrete energy E_d = −∂L_d/∂h (Kane, Marsden & Ortiz)"))
+    return tuple(kernels)
+
+
+def _check_regular(dm: DiscreteModel, step: Kernel, samples: int = 4) -> None:
+    """Refuse an L_d whose step Jacobian (D₁₂L_d, resp. D₁₃L_d) is identically singular."""
+    jac = dict(step.outputs)["jacobian"]
+    args = list(step.z) + list(dm.parameters) + [dm.step]
+    f = sp.lambdify(args, jac, modules="numpy")
+    rng = np.random.default_rng(20261121)
+    n, ranks = jac.shape[0], []
+    for _ in range(samples):
+        values = list(rng.uniform(-0.7, 0.7, len(step.z))) + list(dm.defaults) \
+            + [rng.uniform(0.05, 0.2)]
+        with np.errstate(all="ignore"):
+            J = np.array(f(*values), dtype=float)
+        if not np.all(np.isfinite(J)):
+            continue
+        ranks.append(int(np.linalg.matrix_rank(J, tol=1e-10 * max(1.0, np.abs(J).max()))))
+    if ranks and max(ranks) < n:
+        which = "D₁₂L_d" if dm.order == 1 else "D₁₃L_d"
+        raise ModelError(
+            f"model {dm.name!r} is not regular: the step Jacobian ∂R/∂f ({which} for the pair "
+            f"groupoid) has rank {max(ranks)} < {n} at every sample point, so the discrete "
+            f"Lagrangian does not define a step map (is the Lagrangian degenerate?)")
+
+
+def derive(dm: DiscreteModel) -> DerivedModel:
+    """Derive every kernel of ``dm`` and check that its step map is regular."""
+    kernels = _kernels(dm)
+    _check_regular(dm, kernels[0])
+    g = dm.groupoid
+    return DerivedModel(name=dm.name, kind=g.kind, order=dm.order, source_dim=g.source_dim,
+                        fibre_dim=g.fibre_dim, parameters=dm.parameters, defaults=dm.defaults,
+                        step=dm.step, kernels=kernels, nodes_are_unknowns=g.nodes_are_unknowns,
+                        has_energy=dm.order == 1, fingerprint=dm.fingerprint)

@@ -1,0 +1,127 @@
+"""Discretisation: continuous Lagrangian → discrete Lagrangian L_d (DESIGN.md §3).
+
+The output, :class:`DiscreteModel`, expresses L_d in *slot* coordinates: a first-order
+L_d : G → R has one slot (x₀, f₀), a second-order L_d : G₂ → R two composable slots
+(x₀, f₀), (x₁, f₁) (paper §3.1). The derivation engine only ever sees slots, so every
+groupoid shares it.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Callable, Sequence
+
+import sympy as sp
+
+from .groupoids.base import Groupoid
+
+if TYPE_CHECKING:
+    from .model import Model
+
+Slot = tuple[tuple[sp.Symbol, ...], tuple[sp.Symbol, ...]]
+
+
+@dataclass(frozen=True)
+class Rule:
+    """A named discretisation: ``build(groupoid, L, nodes, h)`` returns L_d."""
+
+    name: str
+    order: int
+    kind: str
+    build: Callable[..., sp.Expr]
+    summary: str
+
+    def applies_to(self, groupoid: Groupoid) -> bool:
+        return groupoid.kind == self.kind
+
+    def continuous_symbols(self, groupoid: Groupoid) -> tuple[sp.Symbol, ...]:
+        symbols = tuple(groupoid.q) + tuple(groupoid.qdot)
+        return symbols + (tuple(groupoid.qddot) if self.order == 2 else ())
+
+
+def _substitute(L, groupoid, q, v, a=None):
+    mapping = dict(zip(groupoid.q, q)) | dict(zip(groupoid.qdot, v))
+    if a is not None:
+        mapping |= dict(zip(groupoid.qddot, a))
+    return L.xreplace(mapping)
+
+
+def _midpoint(groupoid, L, nodes, h):
+    q0, q1 = (sp.Matrix(n) for n in nodes)
+    return h * _substitute(L, groupoid, (q0 + q1) / 2, (q1 - q0) / h)
+
+
+def _trapezoid(groupoid, L, nodes, h):
+    q0, q1 = (sp.Matrix(n) for n in nodes)
+    v = (q1 - q0) / h
+    return h / 2 * (_substitute(L, groupoid, q0, v) + _substitute(L, groupoid, q1, v))
+
+
+def _three_point(groupoid, L, nodes, h):
+    q0, q1, q2 = (sp.Matrix(n) for n in nodes)
+    return h * _substitute(L, groupoid, (q0 + q1 + q2) / 3, (q2 - q0) / (2 * h),
+                           (q2 - 2 * q1 + q0) / h**2)
+
+
+#: Registry of discretisation rules by name.
+RULES: dict[str, Rule] = {
+    "midpoint": Rule("midpoint", 1, "pair", _midpoint,
+                     "L_d(q0, q1) = h L((q0+q1)/2, (q1-q0)/h)"),
+    "trapezoid": Rule("trapezoid", 1, "pair", _trapezoid,
+                      "L_d(q0, q1) = h/2 [L(q0, (q1-q0)/h) + L(q1, (q1-q0)/h)]"),
+    "three_point": Rule("three_point", 2, "pair", _three_point,
+                        "L_d(q0, q1, q2) = h L((q0+q1+q2)/3, (q2-q0)/2h, (q2-2q1+q0)/h^2)"),
+}
+
+
+def rule_names() -> list[str]:
+    return sorted(RULES)
+
+
+@dataclass(frozen=True, eq=False)
+class DiscreteModel:
+    """L_d in slot coordinates, with everything later stages need (no Model inside)."""
+
+    name: str
+    groupoid: Groupoid
+    order: int
+    slots: tuple[Slot, ...]
+    lagrangian: sp.Expr
+    step: sp.Symbol
+    parameters: tuple[sp.Symbol, ...]
+    defaults: tuple[float, ...]
+    continuous_lagrangian: sp.Expr | None
+    fingerprint: str
+
+
+def slot_symbols(groupoid: Groupoid, order: int) -> tuple[Slot, ...]:
+    """Fresh coordinate symbols (x_j, f_j) of the ``order`` slots of L_d."""
+    m, n = groupoid.source_dim, groupoid.fibre_dim
+    return tuple((tuple(sp.Symbol(f"X{j}_{i}", real=True) for i in range(m)),
+                  tuple(sp.Symbol(f"F{j}_{i}", real=True) for i in range(n)))
+                 for j in range(order))
+
+
+def _window_nodes(groupoid: Groupoid, slots: Sequence[Slot]):
+    return groupoid.window_nodes([s[0] for s in slots], [s[1] for s in slots])
+
+
+def discretise(model: "Model") -> DiscreteModel:
+    """Turn a validated :class:`~symvi.model.Model` into a :class:`DiscreteModel`."""
+    from .model import h
+
+    g = model.groupoid
+    slots = slot_symbols(g, model.order)
+    nodes = _window_nodes(g, slots)
+    if model.lagrangian is not None:
+        Ld = RULES[model.discretisation].build(g, model.lagrangian, nodes, h)
+    else:
+        declared = g.nodes(model.order + 1)
+        mapping = {s: e for node, slot_node in zip(declared, nodes)
+                   for s, e in zip(node, slot_node)}
+        Ld = model.discrete_lagrangian.xreplace(mapping)
+    return DiscreteModel(name=model.name, groupoid=g, order=model.order, slots=slots,
+                         lagrangian=Ld,
+                         step=h, parameters=model.parameter_symbols,
+                         defaults=model.parameter_defaults,
+                         continuous_lagrangian=model.lagrangian,
+                         fingerprint=model.fingerprint())

@@ -1,0 +1,107 @@
+"""C emission: kernels → C source text through the Jinja templates in ``templates/``.
+
+Python hands the templates printed expressions and names only; all C text lives in the
+templates. Common subexpressions are eliminated once over all outputs of a kernel
+(residual and Jacobian together), with SymPy's ``cse``.
+"""
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+
+import jinja2
+import sympy as sp
+from sympy.printing.c import C99CodePrinter
+
+from . import __version__
+from .derive import DerivedModel, Kernel
+
+
+class ArrayPrinter(C99CodePrinter):
+    """C99 printer that maps symbols to array slots and expands small integer powers."""
+
+    def __init__(self, names: dict[sp.Symbol, str]):
+        super().__init__()
+        self._names = names
+
+    def _print_Symbol(self, expr):
+        return self._names.get(expr) or super()._print_Symbol(expr)
+
+    def _print_Pow(self, expr):
+        base, exp = expr.as_base_exp()
+        if exp.is_Integer and 2 <= abs(int(exp)) <= 4:
+            b = self.parenthesize(base, 100)
+            product = "*".join([b] * abs(int(exp)))
+            return f"({product})" if exp > 0 else f"(1.0/({product}))"
+        return super()._print_Pow(expr)
+
+
+@dataclass(frozen=True)
+class CSource:
+    """The emitted sources of one model: C body, cffi cdef and a digest of both."""
+
+    c_source: str
+    cdef: str
+    digest: str
+
+
+def template_dir() -> Path:
+    """Directory of the C and Python templates (inside the wheel as ``symvi.templates``)."""
+    try:
+        path = Path(str(resources.files("symvi.templates")))
+        if (path / "module.c.j2").exists():
+            return path
+    except ModuleNotFoundError:
+        pass
+    return Path(__file__).resolve().parent.parent / "templates"
+
+
+def environment() -> jinja2.Environment:
+    return jinja2.Environment(loader=jinja2.FileSystemLoader(str(template_dir())),
+                              undefined=jinja2.StrictUndefined, keep_trailing_newline=True,
+                              trim_blocks=True, lstrip_blocks=True)
+
+
+def _render_kernel(kernel: Kernel, dm: DerivedModel) -> dict:
+    names = {s: f"z[{i}]" for i, s in enumerate(kernel.z)}
+    names |= {s: f"p[{i}]" for i, s in enumerate(dm.parameters)}
+    names[dm.step] = "h"
+    printer = ArrayPrinter(names)
+    flat = [e for _, M in kernel.outputs for e in M]
+    temporaries, reduced = sp.cse(flat, symbols=sp.numbered_symbols("t"), order="none")
+    assignments, position = [], 0
+    outputs = []
+    for out_name, M in kernel.outputs:
+        lines = []
+        for i in range(len(M)):
+            lines.append(f"{out_name}[{i}] = {printer.doprint(reduced[position])};")
+            position += 1
+        outputs.append({"name": out_name, "size": len(M), "assignments": lines})
+    return {"name": kernel.name, "doc": kernel.doc, "nz": len(kernel.z),
+            "temporaries": [{"name": str(t), "code": printer.doprint(e)} for t, e in temporaries],
+            "outputs": outputs}
+
+
+def emit(dm: DerivedModel) -> CSource:
+    """Render the C source and cffi declarations of a derived model."""
+    env = environment()
+    context = {
+        "version": __version__, "name": dm.name, "m": dm.source_dim, "n": dm.fibre_dim,
+        "K": dm.stencil_elements, "order": dm.order, "np": len(dm.parameters),
+        "kernels": [_render_kernel(k, dm) for k in dm.kernels],
+        "bvp": dm.nodes_are_unknowns,
+    }
+    c_source = env.get_template("module.c.j2").render(**context)
+    cdef = env.get_template("cdef.h.j2").render(**context)
+    digest = hashlib.sha256((c_source + cdef).encode()).hexdigest()
+    return CSource(c_source, cdef, digest)
+
+
+def templates_digest() -> str:
+    """Content hash of every template (part of the build cache key)."""
+    h = hashlib.sha256()
+    for path in sorted(template_dir().glob("*.j2")):
+        h.update(path.name.encode() + path.read_bytes())
+    return h.hexdigest()

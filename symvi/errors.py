@@ -1,0 +1,21 @@
+"""Exceptions raised by the compiler stages (model, derivation, build).
+
+Run-time errors of generated modules live in :mod:`symvi._runtime.errors`, which the
+generated packages carry with them (they must not import symvi itself).
+"""
+
+
+class SymviError(Exception):
+    """Base class of every error symvi raises on purpose."""
+
+
+class ModelError(SymviError, ValueError):
+    """A model declaration is invalid: undeclared symbol, wrong shape, not regular, ..."""
+
+
+class BuildError(SymviError, RuntimeError):
+    """The C build failed; the message carries the compiler's own output."""
+
+
+class CompilerNotFoundError(BuildError):
+    """No working C compiler is available to cffi."""

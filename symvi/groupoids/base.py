@@ -1,0 +1,74 @@
+"""The groupoid interface of the derivation engine (DESIGN.md §2, "vary the shared node").
+
+An element g of a Lie groupoid G ⇉ Q is described in coordinates by its source
+x = α(g) ∈ Q (``source_dim`` numbers) and its α-fibre part f (``fibre_dim`` numbers, the
+rank of the algebroid AG). A groupoid supplies only
+
+* ``target(x, f)``: the coordinates of β(g);
+* ``right(x, f)``: the matrix whose column a is d/dε of the coordinates (x, f) of
+  g·σ_a(ε) at ε = 0 — the left-invariant field of the basis section e_a (paper §2.1);
+* ``left(x, f)``: the same for σ_a(ε)⁻¹·g — the paper's −X⃗_a(g); h's source moves too;
+* ``predictor``: an explicit guess of the next fibre part from the previous elements,
+  used to start Newton's method.
+
+Everything else (discrete Euler–Lagrange residuals of any order, momenta, Jacobians) is
+built from these by :mod:`symvi.derive`, so a new groupoid is a new subclass only.
+"""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from typing import Sequence
+
+import sympy as sp
+
+
+class Groupoid(ABC):
+    """A Lie groupoid in coordinates; see the module docstring for the contract."""
+
+    #: Short name of the groupoid kind, stored in generated modules' metadata.
+    kind: str = "abstract"
+
+    @property
+    @abstractmethod
+    def source_dim(self) -> int:
+        """Number of coordinates of a base point x ∈ Q."""
+
+    @property
+    @abstractmethod
+    def fibre_dim(self) -> int:
+        """Rank n of the algebroid: number of fibre coordinates f of an element."""
+
+    @abstractmethod
+    def target(self, x: Sequence[sp.Expr], f: Sequence[sp.Expr]) -> tuple[sp.Expr, ...]:
+        """Coordinates of β(g) for g = (x, f)."""
+
+    @abstractmethod
+    def right(self, x: Sequence[sp.Expr], f: Sequence[sp.Expr]) -> sp.Matrix:
+        """(m+n)×n matrix: column a is d/dε (x, f)(g·σ_a(ε)) at ε = 0."""
+
+    @abstractmethod
+    def left(self, x: Sequence[sp.Expr], f: Sequence[sp.Expr]) -> sp.Matrix:
+        """(m+n)×n matrix: column a is d/dε (x, f)(σ_a(ε)⁻¹·g) at ε = 0."""
+
+    @abstractmethod
+    def predictor(self, xs: Sequence[Sequence[sp.Expr]],
+                  fs: Sequence[Sequence[sp.Expr]]) -> tuple[sp.Expr, ...]:
+        """Guess of the next fibre part given earlier sources ``xs`` and fibres ``fs``."""
+
+    @abstractmethod
+    def fingerprint(self) -> str:
+        """A string that changes whenever the groupoid's geometry changes (build cache)."""
+
+    @property
+    def element_dim(self) -> int:
+        """Number of coordinates (x, f) of one element."""
+        return self.source_dim + self.fibre_dim
+
+    @property
+    def nodes_are_unknowns(self) -> bool:
+        """True when consecutive base points are the path's coordinates (pair groupoid).
+
+        Whole-trajectory solves then take the base points themselves as unknowns and
+        the stencil Jacobian is block-banded.
+        """
+        return False

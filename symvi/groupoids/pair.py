@@ -1,0 +1,92 @@
+"""The pair groupoid Q×Q ⇉ Q over Q = Rⁿ (paper §2.1, first example; DESIGN.md §2)."""
+from __future__ import annotations
+
+from typing import Sequence
+
+import sympy as sp
+
+from ..errors import ModelError
+from .base import Groupoid
+
+
+def _names(coordinates: str | Sequence[str]) -> tuple[str, ...]:
+    if isinstance(coordinates, str):
+        coordinates = coordinates.replace(",", " ").split()
+    names = tuple(str(c) for c in coordinates)
+    if not names:
+        raise ModelError("PairGroupoid needs at least one coordinate name")
+    if len(set(names)) != len(names):
+        raise ModelError(f"PairGroupoid coordinate names repeat: {names}")
+    for name in names:
+        if not name.isidentifier():
+            raise ModelError(f"coordinate name {name!r} is not a valid identifier")
+    return names
+
+
+class PairGroupoid(Groupoid):
+    """Q×Q with α(q₀, q₁) = q₀, β(q₀, q₁) = q₁ and (q₀, q₁)(q₁, q₂) = (q₀, q₂).
+
+    An element is (x, f) = (q_k, q_{k+1}). The variations of DESIGN.md §2 are
+    ``right = ∂/∂f`` and ``left = ∂/∂x``, so the engine reproduces
+    D₁L_d(q_k, q_{k+1}) + D₂L_d(q_{k−1}, q_k) = 0 and, for second order, eq. ``dsoel``.
+
+    Symbols for declaring Lagrangians: ``q`` (coordinates), ``qdot`` (velocities),
+    ``qddot`` (accelerations) and, for a discrete Lagrangian given directly,
+    ``nodes(k)`` — the coordinates of the k+1 nodes q_0, …, q_k of one window.
+
+    Parameters
+    ----------
+    coordinates:
+        Names of the coordinates, as a list or a space/comma separated string.
+    """
+
+    kind = "pair"
+
+    def __init__(self, coordinates: str | Sequence[str]):
+        self.names = _names(coordinates)
+        self.q = tuple(sp.Symbol(n, real=True) for n in self.names)
+        self.qdot = tuple(sp.Symbol(f"{n}_dot", real=True) for n in self.names)
+        self.qddot = tuple(sp.Symbol(f"{n}_ddot", real=True) for n in self.names)
+
+    def __repr__(self) -> str:
+        return f"PairGroupoid({list(self.names)!r})"
+
+    @property
+    def source_dim(self) -> int:
+        return len(self.names)
+
+    @property
+    def fibre_dim(self) -> int:
+        return len(self.names)
+
+    @property
+    def nodes_are_unknowns(self) -> bool:
+        return True
+
+    def nodes(self, count: int) -> tuple[tuple[sp.Symbol, ...], ...]:
+        """Node symbols q_0 … q_{count−1} for writing a discrete Lagrangian directly."""
+        return tuple(tuple(sp.Symbol(f"{n}_{k}", real=True) for n in self.names)
+                     for k in range(count))
+
+    def window_nodes(self, xs, fs) -> list[tuple[sp.Expr, ...]]:
+        """Nodes q_0, q_1, … of a window of consecutive elements (x_j, f_j)."""
+        return [tuple(xs[0])] + [tuple(f) for f in fs]
+
+    def target(self, x, f):
+        return tuple(f)
+
+    def right(self, x, f):
+        n = self.fibre_dim
+        return sp.Matrix.vstack(sp.zeros(n, n), sp.eye(n))
+
+    def left(self, x, f):
+        n = self.fibre_dim
+        return sp.Matrix.vstack(sp.eye(n), sp.zeros(n, n))
+
+    def predictor(self, xs, fs):
+        # Linear extrapolation of the nodes: q_{k+1} ≈ 2 q_k − q_{k−1}.
+        previous = fs[-2] if len(fs) > 1 else xs[-1]
+        return tuple(2 * a - b for a, b in zip(fs[-1], previous))
+
+    def fingerprint(self) -> str:
+        return f"pair:{','.join(self.names)}"

@@ -1,0 +1,205 @@
+"""Model declaration: a groupoid, named parameters and a (continuous or discrete) Lagrangian.
+
+This is the first stage of the pipeline (DESIGN.md §1). A :class:`Model` is validated when
+it is built: undeclared symbols, non-scalar Lagrangians, bad parameter defaults and a
+discretisation that does not fit the Lagrangian's order are refused with a message that
+names the problem. Regularity (an invertible step map) needs the derived equations and is
+checked by :func:`symvi.derive.derive`.
+"""
+from __future__ import annotations
+
+import keyword
+import math
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+import numpy as np
+import sympy as sp
+
+from .discretise import RULES, rule_names
+from .errors import ModelError
+from .groupoids.base import Groupoid
+
+#: The time step. It is a run-time argument of every generated function.
+h = sp.Symbol("h", positive=True)
+
+
+@dataclass(frozen=True)
+class Example:
+    """A default run of a model, used by ``symvi run`` and the documentation.
+
+    ``initial`` holds what the step map needs to start: for the pair groupoid the first
+    ``2·order`` nodes q_0, …, q_{2r−1}, as an array of shape (2r, n).
+    """
+
+    initial: Any
+    h: float
+    n_steps: int
+
+
+def _sympify_parameters(parameters: Mapping[Any, float]) -> tuple[tuple[sp.Symbol, float], ...]:
+    items = []
+    for key, value in parameters.items():
+        symbol = sp.Symbol(key, real=True) if isinstance(key, str) else key
+        if not isinstance(symbol, sp.Symbol):
+            raise ModelError(f"parameter {key!r} must be a SymPy Symbol or a name")
+        try:
+            default = float(value)
+        except (TypeError, ValueError):
+            raise ModelError(f"parameter {symbol} has a non-numeric default {value!r}") from None
+        if not math.isfinite(default):
+            raise ModelError(f"parameter {symbol} has a non-finite default {default}")
+        items.append((symbol, default))
+    names = [str(s) for s, _ in items]
+    if len(set(names)) != len(names):
+        raise ModelError(f"parameter names repeat: {names}")
+    for name in names:
+        if not name.isidentifier() or keyword.iskeyword(name):
+            raise ModelError(f"parameter name {name!r} is not a valid Python identifier")
+    return tuple(items)
+
+
+def _scalar(expr: Any, what: str) -> sp.Expr:
+    if isinstance(expr, (sp.MatrixBase, list, tuple, np.ndarray)):
+        shape = getattr(expr, "shape", (len(expr),))
+        raise ModelError(f"the {what} must be a scalar expression, got shape {tuple(shape)}")
+    try:
+        value = sp.sympify(expr)
+    except (sp.SympifyError, TypeError) as exc:
+        raise ModelError(f"the {what} is not a SymPy expression: {exc}") from None
+    if not isinstance(value, sp.Expr):
+        raise ModelError(f"the {what} must be a scalar expression, got {type(value).__name__}")
+    return value
+
+
+@dataclass(frozen=True, eq=False)
+class Model:
+    """A discrete variational model on a Lie groupoid.
+
+    Give either a continuous ``lagrangian`` (in the groupoid's continuous symbols, e.g.
+    ``G.q``, ``G.qdot`` and, for second order, ``G.qddot``) together with a
+    ``discretisation`` (see :data:`symvi.discretise.RULES`), or a ``discrete_lagrangian``
+    directly (in the groupoid's discrete symbols and :data:`h`) with its ``order``.
+
+    Parameters
+    ----------
+    name:
+        Python identifier; the generated package is called this.
+    groupoid:
+        The Lie groupoid the discrete path lives on.
+    lagrangian, discretisation:
+        Continuous Lagrangian and the rule that turns it into L_d (DESIGN.md §3). With no
+        discretisation given: ``"midpoint"`` for first order, ``"three_point"`` when the
+        Lagrangian contains accelerations.
+    discrete_lagrangian, order:
+        A discrete Lagrangian given directly: order 1 (L_d : G → R) or order 2
+        (L_d : G₂ → R, paper §3.1).
+    parameters:
+        Mapping from parameter symbol (or name) to its default value. Values can be
+        changed at run time without recompiling.
+    example:
+        Optional default run (:class:`Example`).
+    """
+
+    name: str
+    groupoid: Groupoid
+    lagrangian: Any = None
+    discretisation: str | None = None
+    discrete_lagrangian: Any = None
+    order: int | None = None
+    parameters: Mapping[Any, float] = field(default_factory=dict)
+    example: Example | None = None
+    description: str = ""
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.name, str) or not self.name.isidentifier() \
+                or keyword.iskeyword(self.name) or self.name.startswith("_"):
+            raise ModelError(f"model name {self.name!r} must be a public Python identifier")
+        if not isinstance(self.groupoid, Groupoid):
+            raise ModelError(f"groupoid must be a symvi Groupoid, got {type(self.groupoid).__name__}")
+        object.__setattr__(self, "parameters", _sympify_parameters(dict(self.parameters)))
+        if (self.lagrangian is None) == (self.discrete_lagrangian is None):
+            raise ModelError("give exactly one of `lagrangian` (continuous) and "
+                             "`discrete_lagrangian`")
+        if self.lagrangian is not None:
+            self._validate_continuous()
+        else:
+            self._validate_discrete()
+        self._validate_example()
+
+    # -- validation -------------------------------------------------------------------
+    @property
+    def parameter_symbols(self) -> tuple[sp.Symbol, ...]:
+        return tuple(s for s, _ in self.parameters)
+
+    @property
+    def parameter_defaults(self) -> tuple[float, ...]:
+        return tuple(v for _, v in self.parameters)
+
+    def _check_symbols(self, expr: sp.Expr, allowed: Sequence[sp.Symbol], what: str) -> None:
+        clash = set(self.parameter_symbols) & set(self.groupoid_symbols())
+        if clash:
+            raise ModelError(f"parameter(s) {sorted(map(str, clash))} clash with coordinate symbols")
+        unknown = expr.free_symbols - set(allowed)
+        if unknown:
+            names = ", ".join(sorted(map(str, unknown)))
+            raise ModelError(
+                f"undeclared symbol(s) {names} in the {what} of model {self.name!r}; "
+                f"declare them as parameters or use the groupoid's symbols "
+                f"({', '.join(map(str, allowed))})")
+
+    def groupoid_symbols(self) -> tuple[sp.Symbol, ...]:
+        g = self.groupoid
+        return tuple(getattr(g, "q", ())) + tuple(getattr(g, "qdot", ())) \
+            + tuple(getattr(g, "qddot", ()))
+
+    def _validate_continuous(self) -> None:
+        L = _scalar(self.lagrangian, "Lagrangian")
+        object.__setattr__(self, "lagrangian", L)
+        g = self.groupoid
+        has_acc = bool(L.free_symbols & set(getattr(g, "qddot", ())))
+        name = self.discretisation or ("three_point" if has_acc else "midpoint")
+        if name not in RULES:
+            raise ModelError(f"unknown discretisation {name!r}; known: {rule_names()}")
+        rule = RULES[name]
+        if not rule.applies_to(g):
+            raise ModelError(f"discretisation {name!r} does not apply to {g!r}")
+        if has_acc and rule.order < 2:
+            raise ModelError(f"the Lagrangian depends on accelerations "
+                             f"{[str(s) for s in g.qddot if s in L.free_symbols]} but the "
+                             f"discretisation {name!r} is first order; use 'three_point'")
+        if self.order is not None and self.order != rule.order:
+            raise ModelError(f"order={self.order} contradicts discretisation {name!r} "
+                             f"(order {rule.order})")
+        object.__setattr__(self, "discretisation", name)
+        object.__setattr__(self, "order", rule.order)
+        allowed = list(rule.continuous_symbols(g)) + list(self.parameter_symbols)
+        self._check_symbols(L, allowed, "Lagrangian")
+
+    def _validate_discrete(self) -> None:
+        Ld = _scalar(self.discrete_lagrangian, "discrete Lagrangian")
+        object.__setattr__(self, "discrete_lagrangian", Ld)
+        if self.discretisation is not None:
+            raise ModelError("a discrete Lagrangian takes no `discretisation`")
+        if self.order not in (1, 2):
+            raise ModelError(f"a discrete Lagrangian needs order=1 or order=2, got {self.order!r}")
+        window = self.groupoid.nodes(self.order + 1)
+        allowed = [s for node in window for s in node] + [h] + list(self.parameter_symbols)
+        self._check_symbols(Ld, allowed, "discrete Lagrangian")
+
+    def _validate_example(self) -> None:
+        if self.example is None:
+            return
+        initial = np.asarray(self.example.initial, dtype=float)
+        expected = (2 * self.order, self.groupoid.fibre_dim)
+        if initial.shape != expected:
+            raise ModelError(f"example initial data of model {self.name!r} has shape "
+                             f"{initial.shape}, expected {expected} (2·order nodes)")
+
+    # -- identity ---------------------------------------------------------------------
+    def fingerprint(self) -> str:
+        """Canonical text of everything that determines the generated code."""
+        body = self.lagrangian if self.lagrangian is not None else self.discrete_lagrangian
+        params = ";".join(f"{s}={v!r}" for s, v in self.parameters)
+        return "\n".join([self.name, self.groupoid.fingerprint(), str(self.discretisation),
+                          str(self.order), sp.srepr(body), params])
