@@ -1,0 +1,103 @@
+"""Command line: ``symvi compile``, ``symvi run`` and ``symvi list``.
+
+Exit codes: 0 success, 1 a build or a solve failed, 2 bad input (model or arguments).
+"""
+from __future__ import annotations
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from . import __version__
+from .errors import BuildError, ModelError
+from .models import BUNDLED, load
+
+
+def _compile(args) -> int:
+    from .build import compile_model
+    model = load(args.model)
+    start = time.perf_counter()
+    compile_model(model, args.output, force=args.force, verbose=args.verbose)
+    target = Path(args.output) / model.name
+    print(f"{model.name}: {target} ready in {time.perf_counter() - start:.2f} s "
+          f"(import {model.name} with {args.output} on sys.path)")
+    return 0
+
+
+def _run(args) -> int:
+    from .build import compile_model
+    model = load(args.model)
+    if model.example is None:
+        raise ModelError(f"model {model.name!r} declares no example run")
+    start = time.perf_counter()
+    module = compile_model(model, args.output)
+    built = time.perf_counter() - start
+    ex = model.example
+    steps = args.steps if args.steps is not None else ex.n_steps
+    h = args.h if args.h is not None else ex.h
+    start = time.perf_counter()
+    result = module.integrate(ex.initial, steps, h)
+    elapsed = time.perf_counter() - start
+    print(f"model      {model.name} — {model.description}")
+    print(f"build      {built:.2f} s ({Path(args.output) / model.name})")
+    print(f"integrate  {steps} steps, h = {h:g}, T = {steps * h:g}: {elapsed * 1e3:.1f} ms "
+          f"({steps / max(elapsed, 1e-9):,.0f} steps/s)")
+    print(f"status     {result.status.name}: {result.message}")
+    if len(result.newton_iterations):
+        print(f"newton     mean {result.newton_iterations.mean():.2f} iterations per step")
+    if result.energy is not None and len(result.energy):
+        e = result.energy
+        print(f"energy     E_0 = {e[0]:.12g}, max |E − E_0| = {np.abs(e - e[0]).max():.3e}")
+    print(f"final      q = {np.array2string(result.q[-1], precision=6)}")
+    return 0 if result.success else 1
+
+
+def _list(args) -> int:
+    from .models import get
+    for name in BUNDLED:
+        print(f"{name:22s} {get(name).description}")
+    return 0
+
+
+def parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="symvi", description="Compiler for structure-preserving "
+                                "integrators on Lie groupoids.")
+    p.add_argument("--version", action="version", version=f"symvi {__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+    c = sub.add_parser("compile", help="compile MODEL into an importable package")
+    c.add_argument("model", help="a model file (.py defining `model`) or a bundled model name")
+    c.add_argument("-o", "--output", default="generated", help="output directory")
+    c.add_argument("--force", action="store_true", help="rebuild even if cached")
+    c.add_argument("--verbose", action="store_true", help="show the compiler's output")
+    c.set_defaults(func=_compile)
+    r = sub.add_parser("run", help="compile MODEL and integrate its example")
+    r.add_argument("model")
+    r.add_argument("-o", "--output", default="generated")
+    r.add_argument("--steps", type=int, default=None)
+    r.add_argument("--h", type=float, default=None)
+    r.set_defaults(func=_run)
+    ls = sub.add_parser("list", help="list the bundled models")
+    ls.set_defaults(func=_list)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = parser().parse_args(argv)
+    try:
+        return args.func(args)
+    except ModelError as exc:
+        print(f"symvi: error: {exc}", file=sys.stderr)
+        return 2
+    except ValueError as exc:
+        print(f"symvi: error: {exc}", file=sys.stderr)
+        return 2
+    except BuildError as exc:
+        print(f"symvi: build failed: {exc}", file=sys.stderr)
+        return 1
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,38 @@
+"""Bundled models, usable by name on the command line (``symvi compile pendulum``) and in tests.
+
+Each module of this package defines ``model``, a :class:`symvi.Model`.
+"""
+from __future__ import annotations
+
+import importlib
+import runpy
+from pathlib import Path
+
+from ..errors import ModelError
+from ..model import Model
+
+BUNDLED = ("harmonic_oscillator", "pendulum", "double_pendulum", "cubic_spline",
+           "spline_potential")
+
+
+def get(name: str) -> Model:
+    """The bundled model called ``name``."""
+    if name not in BUNDLED:
+        raise ModelError(f"no bundled model {name!r}; bundled models: {', '.join(BUNDLED)}")
+    return importlib.import_module(f"{__name__}.{name}").model
+
+
+def load(spec: str) -> Model:
+    """A bundled model by name, or the ``model`` defined by a Python model file."""
+    path = Path(spec)
+    if path.suffix != ".py":
+        return get(spec)
+    if not path.is_file():
+        raise ModelError(f"model file {spec!r} does not exist")
+    namespace = runpy.run_path(str(path))
+    model = namespace.get("model")
+    if not isinstance(model, Model):
+        found = [k for k, v in namespace.items() if isinstance(v, Model)]
+        hint = f" (found Model objects named {found})" if found else ""
+        raise ModelError(f"model file {spec!r} must define `model = symvi.Model(...)`{hint}")
+    return model

@@ -1,0 +1,44 @@
+"""Shared fixtures: every bundled model is compiled once per test session."""
+from __future__ import annotations
+
+import pytest
+
+from symvi.build import compile_model
+from symvi.derive import derive
+from symvi.discretise import discretise
+from symvi.models import BUNDLED, get
+
+FIRST_ORDER = ("harmonic_oscillator", "pendulum", "double_pendulum")
+SECOND_ORDER = ("cubic_spline", "spline_potential")
+
+
+@pytest.fixture(scope="session")
+def build_dir(tmp_path_factory):
+    return tmp_path_factory.mktemp("generated")
+
+
+@pytest.fixture(scope="session")
+def compiled(build_dir):
+    """compiled(name) -> the generated module of bundled model ``name`` (cached)."""
+    cache = {}
+
+    def get_module(name):
+        if name not in cache:
+            cache[name] = compile_model(get(name), build_dir)
+        return cache[name]
+    return get_module
+
+
+@pytest.fixture(scope="session")
+def derived():
+    """derived(name) -> the DerivedModel (symbolic kernels) of a bundled model (cached)."""
+    cache = {}
+
+    def get_derived(name):
+        if name not in cache:
+            cache[name] = derive(discretise(get(name)))
+        return cache[name]
+    return get_derived
+
+
+__all__ = ["BUNDLED", "FIRST_ORDER", "SECOND_ORDER"]
