@@ -19,7 +19,6 @@ import sys
 import sysconfig
 import tempfile
 import uuid
-from importlib import resources
 from pathlib import Path
 from types import ModuleType
 
@@ -37,7 +36,7 @@ COMPILE_ARGS = ["-O3", "-std=c99", "-fno-math-errno"]
 
 
 def _runtime_files() -> list[Path]:
-    root = Path(str(resources.files("symvi._runtime")))
+    root = Path(__file__).resolve().parent / "_runtime"
     return sorted(root.glob("*.py"))
 
 

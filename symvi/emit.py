@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import hashlib
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 
 import jinja2
@@ -48,14 +47,14 @@ class CSource:
 
 
 def template_dir() -> Path:
-    """Directory of the C and Python templates (inside the wheel as ``symvi.templates``)."""
-    try:
-        path = Path(str(resources.files("symvi.templates")))
-        if (path / "module.c.j2").exists():
-            return path
-    except ModuleNotFoundError:
-        pass
-    return Path(__file__).resolve().parent.parent / "templates"
+    """Directory of the C and Python templates.
+
+    Installed, they ship inside the package as ``symvi/templates``; in a source checkout
+    they are the top-level ``templates/``.
+    """
+    here = Path(__file__).resolve().parent
+    installed = here / "templates"
+    return installed if (installed / "module.c.j2").exists() else here.parent / "templates"
 
 
 def environment() -> jinja2.Environment:
