@@ -9,16 +9,8 @@ __version__ = "0.1.0"
 from .errors import BuildError, CompilerNotFoundError, ModelError, SymviError  # noqa: E402
 from .groupoids import Groupoid, PairGroupoid  # noqa: E402
 from .model import Example, Model, h  # noqa: E402
+from .build import compile_model, load  # noqa: E402
 
 
-def compile_model(model, out_dir="generated", *, force=False, verbose=False):
-    """Derive, emit and build ``model``; return the imported generated module.
-
-    See :func:`symvi.build.compile_model`.
-    """
-    from .build import compile_model as _compile
-    return _compile(model, out_dir, force=force, verbose=verbose)
-
-
-__all__ = ["Model", "Example", "PairGroupoid", "Groupoid", "h", "compile_model",
+__all__ = ["Model", "Example", "PairGroupoid", "Groupoid", "h", "compile_model", "load",
            "ModelError", "BuildError", "CompilerNotFoundError", "SymviError", "__version__"]

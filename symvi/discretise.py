@@ -19,6 +19,9 @@ if TYPE_CHECKING:
 
 Slot = tuple[tuple[sp.Symbol, ...], tuple[sp.Symbol, ...]]
 
+#: The time step. It is a run-time argument of every generated function.
+h = sp.Symbol("h", positive=True)
+
 
 @dataclass(frozen=True)
 class Rule:
@@ -107,8 +110,6 @@ def _window_nodes(groupoid: Groupoid, slots: Sequence[Slot]):
 
 def discretise(model: "Model") -> DiscreteModel:
     """Turn a validated :class:`~symvi.model.Model` into a :class:`DiscreteModel`."""
-    from .model import h
-
     g = model.groupoid
     slots = slot_symbols(g, model.order)
     nodes = _window_nodes(g, slots)

@@ -16,13 +16,9 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import sympy as sp
 
-from .discretise import RULES, rule_names
+from .discretise import RULES, h, rule_names
 from .errors import ModelError
 from .groupoids.base import Groupoid
-
-#: The time step. It is a run-time argument of every generated function.
-h = sp.Symbol("h", positive=True)
-
 
 @dataclass(frozen=True)
 class Example:
