@@ -122,11 +122,7 @@ def _stack(vectors) -> sp.Matrix:
 def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
     engine, r, n = _Engine(dm), dm.order, dm.groupoid.fibre_dim
     full = _stencil(dm, 2 * r)
-    # Only window r contains the unknown element: the other windows' part of the
-    # residual is fixed during a step and is evaluated once, not at every Newton iteration.
-    known = engine.variation(full, r, range(r))
-    moving = engine.variation(full, r, [r])
-    residual = known + moving
+    residual = engine.variation(full, r, range(r + 1))
     unknown = full.fs[-1]
     guess = sp.Matrix(dm.groupoid.predictor(full.xs[:-1], full.fs[:-1]))
     one = _stencil(dm, 1)
@@ -137,11 +133,6 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
     kernels = [
         Kernel("step", full.z, (("residual", residual), ("jacobian", residual.jacobian(unknown))),
                "discrete Euler–Lagrange residual at the middle node and ∂R/∂f_{K−1}"),
-        Kernel("step_known", full.z, (("residual", known),),
-               "the part of the residual from windows without the unknown element"),
-        Kernel("step_moving", full.z,
-               (("residual", moving), ("jacobian", moving.jacobian(unknown))),
-               "the part of the residual from the window with the unknown, and ∂R/∂f_{K−1}"),
         Kernel("stencil", full.z, (("residual", residual), ("jacobian", residual.jacobian(full.z))),
                "residual and its Jacobian with respect to every stencil coordinate"),
         Kernel("predict", full.z, (("guess", guess),),
