@@ -19,6 +19,7 @@ import sympy as sp
 from .discretise import RULES, h, rule_names
 from .errors import ModelError
 from .groupoids.base import Groupoid
+from .rank import generic_rank
 
 @dataclass(frozen=True)
 class Example:
@@ -171,6 +172,25 @@ class Model:
         object.__setattr__(self, "order", rule.order)
         allowed = list(rule.continuous_symbols(g)) + list(self.parameter_symbols)
         self._check_symbols(L, allowed, "Lagrangian")
+        self._check_hessian(L, g.qddot if rule.order == 2 else g.qdot, allowed)
+
+    def _check_hessian(self, L: sp.Expr, highest: Sequence[sp.Symbol], allowed) -> None:
+        """Refuse a degenerate L: ∂²L/∂q̇² (∂²L/∂q̈² for second order) singular everywhere.
+
+        Its discretisation would then have D₁₂L_d (D₁₃L_d) singular as h → 0 — not a
+        well-posed step map, even where a rule happens to make it invertible at finite h.
+        """
+        hessian = sp.hessian(L, highest)
+        free = [s for s in allowed if s not in self.parameter_symbols]
+        rank = generic_rank(hessian, free, dict(self.parameters))
+        if rank is not None and rank < len(highest):
+            which = "D₁₃L_d" if self.order == 2 else "D₁₂L_d"
+            var = "accelerations" if self.order == 2 else "velocities"
+            raise ModelError(
+                f"the Lagrangian of model {self.name!r} is not regular: its Hessian with "
+                f"respect to the {var} {[str(s) for s in highest]} has rank {rank} < "
+                f"{len(highest)} everywhere, so {which} of the discrete Lagrangian is "
+                f"singular as h → 0")
 
     def _validate_discrete(self) -> None:
         Ld = _scalar(self.discrete_lagrangian, "discrete Lagrangian")

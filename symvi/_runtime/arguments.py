@@ -14,11 +14,14 @@ def finite_array(value, shape: tuple[int, ...], what: str) -> np.ndarray:
         arr = np.array(value, dtype=np.float64, order="C")
     except (TypeError, ValueError) as exc:
         raise ValueError(f"{what} must be an array of numbers: {exc}") from None
+    squeezed = tuple(shape)
+    while squeezed and squeezed[-1] == 1:
+        squeezed = squeezed[:-1]
     if arr.shape != shape:
-        if arr.size == math.prod(shape):
-            arr = arr.reshape(shape)
-        else:
+        # a scalar model's nodes may come without their trailing unit axis: (K,) for (K, 1)
+        if arr.shape != squeezed or not squeezed:
             raise ValueError(f"{what} has shape {arr.shape}, expected {shape}")
+        arr = arr.reshape(shape)
     bad = ~np.isfinite(arr)
     if bad.any():
         index = tuple(int(i) for i in np.argwhere(bad)[0])

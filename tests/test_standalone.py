@@ -1,0 +1,261 @@
+"""Generated packages stand alone, and the build cache is correct and safe.
+
+* ``symvi compile NAME -o DIR`` (console script, or ``python -m symvi.cli``) works for every
+  bundled model; the package then imports and runs its example in a fresh interpreter where
+  importing SymPy — and symvi itself — fails.
+* An unchanged model reuses its build (same extension file, fast); a changed parameter
+  default or Lagrangian rebuilds.
+* Two concurrent compiles into one directory both succeed and leave one working package;
+  debris of an interrupted build does not break the next compile or import.
+"""
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+import sys
+import textwrap
+import time
+from pathlib import Path
+
+import numpy as np
+import pytest
+import sympy as sp
+
+import symvi
+from symvi import Model, PairGroupoid
+from symvi.build import MANIFEST, compile_model
+from symvi.models import BUNDLED, get
+
+#: Directory that makes ``import symvi`` work in a child process (checkout or install).
+SYMVI_ROOT = str(Path(symvi.__file__).resolve().parent.parent)
+
+
+def child_env() -> dict:
+    env = dict(os.environ)
+    env["PYTHONPATH"] = os.pathsep.join(p for p in (SYMVI_ROOT, env.get("PYTHONPATH")) if p)
+    return env
+
+
+def symvi_command() -> list[str]:
+    """The ``symvi`` console script installed next to this interpreter, else ``-m``."""
+    script = Path(sys.executable).with_name("symvi")
+    if script.is_file() and os.access(script, os.X_OK):
+        return [str(script)]
+    return [sys.executable, "-m", "symvi.cli"]
+
+
+def run_cli(*args, timeout=300, **popen) -> subprocess.CompletedProcess:
+    return subprocess.run([*symvi_command(), *args], capture_output=True, text=True,
+                          env=child_env(), timeout=timeout, **popen)
+
+
+# Run in a fresh interpreter: SymPy and symvi are made unimportable *before* anything else,
+# then the generated package is imported from DIR and its example integrated.
+CHILD = textwrap.dedent("""
+    import sys
+    sys.modules["sympy"] = None          # `import sympy` now raises ImportError
+    sys.modules["symvi"] = None          # so does `import symvi`
+    import json
+    spec = json.loads(sys.argv[1])
+    for blocked in ("sympy", "symvi"):
+        try:
+            __import__(blocked)
+        except ImportError:
+            pass
+        else:
+            raise SystemExit(f"{blocked} is importable: the test set-up is broken")
+    sys.path.insert(0, spec["dir"])
+    import importlib
+    mod = importlib.import_module(spec["name"])
+    r = mod.integrate(spec["initial"], spec["n_steps"], spec["h"])
+    loaded = sorted(m for m in sys.modules if m.split(".")[0] in ("sympy", "symvi")
+                    and sys.modules[m] is not None)
+    print(json.dumps({"success": bool(r.success), "message": r.message,
+                      "final": r.q[-1].tolist(), "rows": int(r.q.shape[0]),
+                      "file": mod.__file__, "loaded": loaded}))
+""")
+
+
+def run_standalone(directory: Path, name: str, initial, n_steps: int, h: float) -> dict:
+    spec = {"dir": str(directory), "name": name, "initial": np.asarray(initial).tolist(),
+            "n_steps": int(n_steps), "h": float(h)}
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
+    proc = subprocess.run([sys.executable, "-c", CHILD, json.dumps(spec)], capture_output=True,
+                          text=True, env=env, cwd=str(directory), timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def extension_of(package: Path) -> Path:
+    manifest = json.loads((package / MANIFEST).read_text())
+    return package / manifest["extension"]
+
+
+# -- the command line and standalone packages -------------------------------------------------
+@pytest.fixture(scope="module")
+def cli_dir(tmp_path_factory):
+    return tmp_path_factory.mktemp("cli_generated")
+
+
+@pytest.mark.parametrize("name", BUNDLED)
+def test_cli_compile_then_standalone_import_runs_example(cli_dir, compiled, name):
+    proc = run_cli("compile", name, "-o", str(cli_dir))
+    assert proc.returncode == 0, proc.stderr
+    assert name in proc.stdout and "ready" in proc.stdout
+    package = cli_dir / name
+    assert (package / "__init__.py").is_file() and extension_of(package).is_file()
+    assert (package / "_runtime").is_dir()
+
+    example = get(name).example
+    out = run_standalone(cli_dir, name, example.initial, example.n_steps, example.h)
+    assert out["success"], out["message"]
+    assert out["loaded"] == []                       # neither sympy nor symvi was loaded
+    assert Path(out["file"]).resolve() == (package / "__init__.py").resolve()
+    assert out["rows"] == 2 * get(name).order + example.n_steps
+    # Same numbers as the in-process build of the same model (same C source and flags).
+    reference = compiled(name).integrate(example.initial, example.n_steps, example.h)
+    np.testing.assert_allclose(out["final"], reference.q[-1], rtol=1e-12, atol=1e-12)
+
+
+def test_cli_second_compile_is_a_cache_hit(tmp_path):
+    import re
+
+    first = run_cli("compile", "pendulum", "-o", str(tmp_path))
+    assert first.returncode == 0, first.stderr
+    ext = extension_of(tmp_path / "pendulum")
+    before = ext.stat()
+    second = run_cli("compile", "pendulum", "-o", str(tmp_path))
+    assert second.returncode == 0, second.stderr
+    after = ext.stat()
+    assert (after.st_ino, after.st_mtime_ns) == (before.st_ino, before.st_mtime_ns)
+    seconds = [float(m) for m in re.findall(r"ready in ([0-9.]+) s", first.stdout + second.stdout)]
+    assert len(seconds) == 2, first.stdout + second.stdout
+    print(f"\nCLI compile pendulum: first {seconds[0]:.2f} s, second {seconds[1]:.2f} s")
+    assert seconds[1] < 0.5 and seconds[1] < seconds[0] / 2
+
+
+def test_cli_reports_unknown_model(tmp_path):
+    proc = run_cli("compile", "no_such_model", "-o", str(tmp_path))
+    assert proc.returncode == 2
+    assert "no_such_model" in proc.stderr and "bundled models" in proc.stderr
+
+
+# -- cache -----------------------------------------------------------------------------------
+def oscillator(k_default=1.0, quartic=False, name="cache_probe"):
+    G = PairGroupoid("x")
+    (x,), (v,) = G.q, G.qdot
+    k = sp.Symbol("k", positive=True)
+    L = v**2 / 2 - k * x**2 / 2 - (x**4 / 4 if quartic else 0)
+    return Model(name, G, lagrangian=L, parameters={k: k_default})
+
+
+def test_unchanged_model_reuses_build(tmp_path):
+    mod = compile_model(oscillator(), tmp_path)
+    ext = extension_of(tmp_path / "cache_probe")
+    before = ext.stat()
+    start = time.perf_counter()
+    again = compile_model(oscillator(), tmp_path)    # an equal model, built anew in Python
+    elapsed = time.perf_counter() - start
+    after = ext.stat()
+    assert (after.st_ino, after.st_mtime_ns) == (before.st_ino, before.st_mtime_ns)
+    assert extension_of(tmp_path / "cache_probe") == ext
+    assert elapsed < 0.5, f"cached compile took {elapsed:.2f} s"
+    assert again.INFO["key"] == mod.INFO["key"]
+    print(f"\ncached compile: {elapsed * 1e3:.1f} ms")
+
+
+def test_changed_default_or_lagrangian_rebuilds(tmp_path):
+    T, N = np.pi, 2000
+    h = T / N
+    base = compile_model(oscillator(1.0), tmp_path)
+    key0 = base.INFO["key"]
+    ext0 = extension_of(tmp_path / "cache_probe")
+
+    stiffer = compile_model(oscillator(4.0), tmp_path)        # ω = 2: x(π) = x(0)
+    ext1 = extension_of(tmp_path / "cache_probe")
+    assert stiffer.INFO["key"] != key0 and ext1 != ext0
+    assert stiffer.INFO["defaults"] == [4.0]
+    # the new default is what the new build uses (no params given)
+    r0 = base.integrate([[1.0], [np.cos(h)]], N - 1, h)
+    r1 = stiffer.integrate([[1.0], [np.cos(2 * h)]], N - 1, h)
+    assert r0.q[-1, 0] == pytest.approx(-1.0, abs=1e-5)
+    assert r1.q[-1, 0] == pytest.approx(1.0, abs=1e-5)
+
+    quartic = compile_model(oscillator(4.0, quartic=True), tmp_path)
+    ext2 = extension_of(tmp_path / "cache_probe")
+    assert quartic.INFO["key"] not in (key0, stiffer.INFO["key"]) and ext2 not in (ext0, ext1)
+    r2 = quartic.integrate([[1.0], [np.cos(2 * h)]], N - 1, h)
+    assert abs(r2.q[-1, 0] - 1.0) > 1e-2                      # different dynamics
+    # only the current build is left in the package directory
+    assert sorted(p.name for p in (tmp_path / "cache_probe").glob("_ext_*")) == [ext2.name]
+
+
+# -- concurrency and interrupted builds ------------------------------------------------------
+def test_concurrent_compiles_into_same_directory(tmp_path):
+    name = "harmonic_oscillator"
+    procs = [subprocess.Popen([*symvi_command(), "compile", name, "-o", str(tmp_path)],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                              env=child_env())
+             for _ in range(2)]
+    results = [p.communicate(timeout=300) for p in procs]
+    for p, (out, err) in zip(procs, results):
+        assert p.returncode == 0, err
+    # one package, no scratch or old directories left behind
+    entries = sorted(p.name for p in tmp_path.iterdir())
+    assert [e for e in entries if not e.endswith(".lock")] == [name], entries
+    assert len(list((tmp_path / name).glob("_ext_*"))) == 1
+    example = get(name).example
+    out = run_standalone(tmp_path, name, example.initial, example.n_steps, example.h)
+    assert out["success"], out["message"]
+
+
+def test_interrupted_build_debris_does_not_break_compile_or_import(tmp_path):
+    name = "pendulum"
+    example = get(name).example
+    # a half-written scratch directory of an earlier, killed build ...
+    junk = tmp_path / f".{name}-build-deadbeef" / name
+    junk.mkdir(parents=True)
+    (junk / "__init__.py").write_text("raise RuntimeError('half-written package imported')\n")
+    (junk / "_ext_0000000000000000.c").write_text("this is not C")
+    (tmp_path / f".{name}-build-deadbeef" / f"{name}-work").mkdir()
+    # ... and a package directory without its manifest or extension (killed mid-copy)
+    partial = tmp_path / name
+    (partial / "_runtime").mkdir(parents=True)
+    (partial / "__init__.py").write_text("raise RuntimeError('partial package imported')\n")
+
+    mod = compile_model(get(name), tmp_path)
+    assert mod.integrate(example.initial, 100, example.h).success
+    assert extension_of(partial).is_file()
+    out = run_standalone(tmp_path, name, example.initial, example.n_steps, example.h)
+    assert out["success"], out["message"]
+
+    # a later compile of the same model is a cache hit despite the debris
+    ext = extension_of(partial)
+    before = ext.stat()
+    compile_model(get(name), tmp_path)
+    assert ext.stat().st_mtime_ns == before.st_mtime_ns
+
+
+def test_package_with_missing_extension_is_rebuilt(tmp_path):
+    name = "harmonic_oscillator"
+    compile_model(get(name), tmp_path)
+    ext = extension_of(tmp_path / name)
+    ext.unlink()                                     # manifest now points at nothing
+    compile_model(get(name), tmp_path)
+    assert extension_of(tmp_path / name).is_file()
+    example = get(name).example
+    out = run_standalone(tmp_path, name, example.initial, example.n_steps, example.h)
+    assert out["success"], out["message"]
+
+
+def test_generated_package_is_relocatable(tmp_path):
+    """The package carries its own runtime: copied elsewhere it still imports and runs."""
+    name = "cubic_spline"
+    compile_model(get(name), tmp_path / "a")
+    shutil.copytree(tmp_path / "a" / name, tmp_path / "b" / name)
+    shutil.rmtree(tmp_path / "a")
+    example = get(name).example
+    out = run_standalone(tmp_path / "b", name, example.initial, example.n_steps, example.h)
+    assert out["success"], out["message"]
