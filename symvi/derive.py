@@ -75,8 +75,8 @@ class _Stencil:
 
 def _stencil(dm: DiscreteModel, elements: int) -> _Stencil:
     g = dm.groupoid
-    x0 = tuple(sp.Symbol(f"x_{i}", real=True) for i in range(g.source_dim))
-    fs = tuple(tuple(sp.Symbol(f"f{k}_{i}", real=True) for i in range(g.fibre_dim))
+    x0 = tuple(sp.Dummy(f"x_{i}", real=True) for i in range(g.source_dim))
+    fs = tuple(tuple(sp.Dummy(f"f{k}_{i}", real=True) for i in range(g.fibre_dim))
                for k in range(elements))
     xs = [x0]
     for k in range(elements - 1):

@@ -99,8 +99,8 @@ class DiscreteModel:
 def slot_symbols(groupoid: Groupoid, order: int) -> tuple[Slot, ...]:
     """Fresh coordinate symbols (x_j, f_j) of the ``order`` slots of L_d."""
     m, n = groupoid.source_dim, groupoid.fibre_dim
-    return tuple((tuple(sp.Symbol(f"X{j}_{i}", real=True) for i in range(m)),
-                  tuple(sp.Symbol(f"F{j}_{i}", real=True) for i in range(n)))
+    return tuple((tuple(sp.Dummy(f"X{j}_{i}", real=True) for i in range(m)),
+                  tuple(sp.Dummy(f"F{j}_{i}", real=True) for i in range(n)))
                  for j in range(order))
 
 

@@ -28,6 +28,8 @@ class ArrayPrinter(C99CodePrinter):
     def _print_Symbol(self, expr):
         return self._names.get(expr) or super()._print_Symbol(expr)
 
+    _print_Dummy = _print_Symbol
+
     def _print_Pow(self, expr):
         base, exp = expr.as_base_exp()
         if exp.is_Integer and 2 <= abs(int(exp)) <= 4:

@@ -53,6 +53,8 @@ def _sympify_parameters(parameters: Mapping[Any, float]) -> tuple[tuple[sp.Symbo
     for name in names:
         if not name.isidentifier() or keyword.iskeyword(name):
             raise ModelError(f"parameter name {name!r} is not a valid Python identifier")
+        if name == str(h):
+            raise ModelError(f"parameter name {name!r} is reserved for the time step")
     return tuple(items)
 
 

@@ -296,3 +296,23 @@ def test_missing_compiler_is_reported(tmp_path, monkeypatch):
     assert "no C compiler" in message and "/nonexistent/cc" in message
     assert isinstance(info.value, BuildError)
     assert not (tmp_path / "harmonic_oscillator").exists()
+
+
+@pytest.mark.parametrize("name", ["X0_0", "F0_0", "x_0", "f1_0"])
+def test_parameter_named_like_internal_symbols_is_not_confused(tmp_path, name):
+    """Slot and stencil coordinates are Dummy symbols, so no user name can alias them:
+    the midpoint residual of L = v²/2 − k q²/2 at (0.1, 0.2, 0.3), h = 0.1, k = 2 is
+    (2q₁ − q₀ − q₂)/h − h k (q₀ + 2q₁ + q₂)/4 = −0.04."""
+    G, x, v = oscillator_symbols()
+    k = sp.Symbol(name, real=True)
+    model = Model(f"clash_{name.lower()}", G, lagrangian=v**2 / 2 - k * x**2 / 2,
+                  parameters={k: 2.0})
+    residual, _ = compile_model(model, tmp_path).evaluate("step", [0.1, 0.2, 0.3], 0.1)
+    assert residual[0] == pytest.approx(-0.04, rel=1e-12)
+
+
+def test_parameter_named_h_is_reserved():
+    G, x, v = oscillator_symbols()
+    hh = sp.Symbol("h", real=True)
+    with pytest.raises(ModelError, match="reserved for the time step"):
+        Model("bad", G, lagrangian=v**2 / 2 - hh * x**2, parameters={hh: 1.0})

@@ -47,7 +47,7 @@ def integrate(model, initial, n_steps: int, h: float, params=None, *, maxiter: i
         message = f"integrated {n_steps} steps"
     else:
         reason = _FAILURE[status].format(maxiter=maxiter)
-        message = (f"step {steps} (t = {(K - 1 + steps) * h:.6g}) failed: {reason}; "
+        message = (f"step {steps} (to t = {(K + steps) * h:.6g}) failed: {reason}; "
                    f"residual norm {rnorm[0]:.3e}")
         x, f = x[: K + steps], f[: K - 1 + steps]
     result = StepResult(t=h * np.arange(x.shape[0]), x=x, f=f,
