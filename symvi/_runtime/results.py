@@ -2,7 +2,9 @@
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Callable
 
 import numpy as np
 
@@ -40,7 +42,9 @@ class StepResult(_Checkable):
     momenta : discrete Legendre transforms at each state: (E+1, n) for first order
         (p_0 from F⁻L_d, p_k for k ≥ 1 from F⁺L_d), (E, 2, n) for second order (state k
         is the node pair (ν_k, ν_{k+1}); states 0, 1 from F⁻L_d, the rest from F⁺L_d).
+        Evaluated in C on first access.
     energy : (E,) discrete energy −∂L_d/∂h per element (first-order models), else None.
+        Evaluated in C on first access.
     newton_iterations : (steps,) Newton iterations of each computed step.
     status, success, message : outcome; on failure the arrays hold the path up to the
         failing step.
@@ -49,15 +53,22 @@ class StepResult(_Checkable):
     t: np.ndarray
     x: np.ndarray
     f: np.ndarray
-    momenta: np.ndarray
-    energy: np.ndarray | None
     newton_iterations: np.ndarray
     status: Status
     message: str
+    along: Callable[[str], np.ndarray | None] = field(repr=False, compare=False)
 
     @property
     def success(self) -> bool:
         return self.status == Status.SUCCESS
+
+    @cached_property
+    def momenta(self) -> np.ndarray:
+        return self.along("momenta")
+
+    @cached_property
+    def energy(self) -> np.ndarray | None:
+        return self.along("energy")
 
     @property
     def q(self) -> np.ndarray:

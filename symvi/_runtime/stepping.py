@@ -50,9 +50,14 @@ def integrate(model, initial, n_steps: int, h: float, params=None, *, maxiter: i
         message = (f"step {steps} (to t = {(K + steps) * h:.6g}) failed: {reason}; "
                    f"residual norm {rnorm[0]:.3e}")
         x, f = x[: K + steps], f[: K - 1 + steps]
+    def along(quantity: str):
+        if quantity == "momenta":
+            return model.momenta(x, f, h, params)
+        if model.info["has_energy"]:
+            return model.along("energy", x, f, h, params)[:, 0]
+        return None
+
     result = StepResult(t=h * np.arange(x.shape[0]), x=x, f=f,
-                        momenta=model.momenta(x, f, h, params),
-                        energy=(model.along("energy", x, f, h, params)[:, 0]
-                                if model.info["has_energy"] else None),
-                        newton_iterations=iters[:steps].copy(), status=status, message=message)
+                        newton_iterations=iters[:steps].copy(), status=status, message=message,
+                        along=along)
     return result.raise_for_status() if raise_on_failure else result
