@@ -109,7 +109,7 @@ class _Engine:
                 slot = element - w
                 if 0 <= slot < r:
                     grad = self.gradients[slot].xreplace(mapping)
-                    total += side(st.xs[element], st.fs[element]).T * grad
+                    total += side(st.xs[element], st.fs[element], self.dm.step).T * grad
         return total
 
     def lagrangian(self, st: _Stencil, w: int) -> sp.Expr:

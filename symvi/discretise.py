@@ -8,7 +8,7 @@ groupoid shares it.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable, Sequence
+from typing import TYPE_CHECKING, Callable
 
 import sympy as sp
 
@@ -25,7 +25,10 @@ h = sp.Symbol("h", positive=True)
 
 @dataclass(frozen=True)
 class Rule:
-    """A named discretisation: ``build(groupoid, L, nodes, h)`` returns L_d."""
+    """A named discretisation: ``build(groupoid, L, xs, fs, h)`` returns L_d.
+
+    ``xs``, ``fs`` are the source and fibre coordinates of the rule's ``order`` slots.
+    """
 
     name: str
     order: int
@@ -36,9 +39,6 @@ class Rule:
     def applies_to(self, groupoid: Groupoid) -> bool:
         return groupoid.kind == self.kind
 
-    def continuous_symbols(self, groupoid: Groupoid) -> tuple[sp.Symbol, ...]:
-        symbols = tuple(groupoid.q) + tuple(groupoid.qdot)
-        return symbols + (tuple(groupoid.qddot) if self.order == 2 else ())
 
 
 def _substitute(L, groupoid, q, v, a=None):
@@ -48,19 +48,19 @@ def _substitute(L, groupoid, q, v, a=None):
     return L.xreplace(mapping)
 
 
-def _midpoint(groupoid, L, nodes, h):
-    q0, q1 = (sp.Matrix(n) for n in nodes)
+def _midpoint(groupoid, L, xs, fs, h):
+    q0, q1 = (sp.Matrix(n) for n in groupoid.window_nodes(xs, fs))
     return h * _substitute(L, groupoid, (q0 + q1) / 2, (q1 - q0) / h)
 
 
-def _trapezoid(groupoid, L, nodes, h):
-    q0, q1 = (sp.Matrix(n) for n in nodes)
+def _trapezoid(groupoid, L, xs, fs, h):
+    q0, q1 = (sp.Matrix(n) for n in groupoid.window_nodes(xs, fs))
     v = (q1 - q0) / h
     return h / 2 * (_substitute(L, groupoid, q0, v) + _substitute(L, groupoid, q1, v))
 
 
-def _three_point(groupoid, L, nodes, h):
-    q0, q1, q2 = (sp.Matrix(n) for n in nodes)
+def _three_point(groupoid, L, xs, fs, h):
+    q0, q1, q2 = (sp.Matrix(n) for n in groupoid.window_nodes(xs, fs))
     return h * _substitute(L, groupoid, (q0 + q1 + q2) / 3, (q2 - q0) / (2 * h),
                            (q2 - 2 * q1 + q0) / h**2)
 
@@ -104,25 +104,17 @@ def slot_symbols(groupoid: Groupoid, order: int) -> tuple[Slot, ...]:
                  for j in range(order))
 
 
-def _window_nodes(groupoid: Groupoid, slots: Sequence[Slot]):
-    return groupoid.window_nodes([s[0] for s in slots], [s[1] for s in slots])
-
-
 def discretise(model: "Model") -> DiscreteModel:
     """Turn a validated :class:`~symvi.model.Model` into a :class:`DiscreteModel`."""
     g = model.groupoid
     slots = slot_symbols(g, model.order)
-    nodes = _window_nodes(g, slots)
+    xs, fs = [s[0] for s in slots], [s[1] for s in slots]
     if model.lagrangian is not None:
-        Ld = RULES[model.discretisation].build(g, model.lagrangian, nodes, h)
+        Ld = RULES[model.discretisation].build(g, model.lagrangian, xs, fs, h)
     else:
-        declared = g.nodes(model.order + 1)
-        mapping = {s: e for node, slot_node in zip(declared, nodes)
-                   for s, e in zip(node, slot_node)}
-        Ld = model.discrete_lagrangian.xreplace(mapping)
+        Ld = model.discrete_lagrangian.xreplace(g.discrete_mapping(model.order, xs, fs))
     return DiscreteModel(name=model.name, groupoid=g, order=model.order, slots=slots,
-                         lagrangian=Ld,
-                         step=h, parameters=model.parameter_symbols,
+                         lagrangian=Ld, step=h, parameters=model.parameter_symbols,
                          defaults=model.parameter_defaults,
                          continuous_lagrangian=model.lagrangian,
                          fingerprint=model.fingerprint())

@@ -148,33 +148,31 @@ class Model:
                 f"({', '.join(map(str, allowed))})")
 
     def groupoid_symbols(self) -> tuple[sp.Symbol, ...]:
-        g = self.groupoid
-        return tuple(getattr(g, "q", ())) + tuple(getattr(g, "qdot", ())) \
-            + tuple(getattr(g, "qddot", ()))
+        return self.groupoid.continuous_symbols(2)
 
     def _validate_continuous(self) -> None:
         L = _scalar(self.lagrangian, "Lagrangian")
         object.__setattr__(self, "lagrangian", L)
         g = self.groupoid
-        has_acc = bool(L.free_symbols & set(getattr(g, "qddot", ())))
-        name = self.discretisation or ("three_point" if has_acc else "midpoint")
+        second = [s for s in g.leading_symbols(2) if s in L.free_symbols]
+        name = self.discretisation or g.default_discretisation(2 if second else 1)
         if name not in RULES:
             raise ModelError(f"unknown discretisation {name!r}; known: {rule_names()}")
         rule = RULES[name]
         if not rule.applies_to(g):
             raise ModelError(f"discretisation {name!r} does not apply to {g!r}")
-        if has_acc and rule.order < 2:
-            raise ModelError(f"the Lagrangian depends on accelerations "
-                             f"{[str(s) for s in g.qddot if s in L.free_symbols]} but the "
-                             f"discretisation {name!r} is first order; use 'three_point'")
+        if second and rule.order < 2:
+            raise ModelError(f"the Lagrangian depends on {[str(s) for s in second]} (second "
+                             f"order) but the discretisation {name!r} is first order; use "
+                             f"{g.default_discretisation(2)!r}")
         if self.order is not None and self.order != rule.order:
             raise ModelError(f"order={self.order} contradicts discretisation {name!r} "
                              f"(order {rule.order})")
         object.__setattr__(self, "discretisation", name)
         object.__setattr__(self, "order", rule.order)
-        allowed = list(rule.continuous_symbols(g)) + list(self.parameter_symbols)
+        allowed = list(g.continuous_symbols(rule.order)) + list(self.parameter_symbols)
         self._check_symbols(L, allowed, "Lagrangian")
-        self._check_hessian(L, g.qddot if rule.order == 2 else g.qdot, allowed)
+        self._check_hessian(L, g.leading_symbols(rule.order), allowed)
 
     def _check_hessian(self, L: sp.Expr, highest: Sequence[sp.Symbol], allowed) -> None:
         """Refuse a degenerate L: ∂²L/∂q̇² (∂²L/∂q̈² for second order) singular everywhere.
@@ -187,10 +185,9 @@ class Model:
         rank = generic_rank(hessian, free, dict(self.parameters))
         if rank is not None and rank < len(highest):
             which = "D₁₃L_d" if self.order == 2 else "D₁₂L_d"
-            var = "accelerations" if self.order == 2 else "velocities"
             raise ModelError(
                 f"the Lagrangian of model {self.name!r} is not regular: its Hessian with "
-                f"respect to the {var} {[str(s) for s in highest]} has rank {rank} < "
+                f"respect to {[str(s) for s in highest]} has rank {rank} < "
                 f"{len(highest)} everywhere, so {which} of the discrete Lagrangian is "
                 f"singular as h → 0")
 
@@ -201,8 +198,8 @@ class Model:
             raise ModelError("a discrete Lagrangian takes no `discretisation`")
         if self.order not in (1, 2):
             raise ModelError(f"a discrete Lagrangian needs order=1 or order=2, got {self.order!r}")
-        window = self.groupoid.nodes(self.order + 1)
-        allowed = [s for node in window for s in node] + [h] + list(self.parameter_symbols)
+        allowed = list(self.groupoid.discrete_symbols(self.order)) + [h] \
+            + list(self.parameter_symbols)
         self._check_symbols(Ld, allowed, "discrete Lagrangian")
 
     def _validate_example(self) -> None:

@@ -5,9 +5,10 @@ x = α(g) ∈ Q (``source_dim`` numbers) and its α-fibre part f (``fibre_dim`` 
 rank of the algebroid AG). A groupoid supplies only
 
 * ``target(x, f)``: the coordinates of β(g);
-* ``right(x, f)``: the matrix whose column a is d/dε of the coordinates (x, f) of
+* ``right(x, f, h)``: the matrix whose column a is d/dε of the coordinates (x, f) of
   g·σ_a(ε) at ε = 0 — the left-invariant field of the basis section e_a (paper §2.1);
-* ``left(x, f)``: the same for σ_a(ε)⁻¹·g — the paper's −X⃗_a(g); h's source moves too;
+  h is the time step, for groupoids whose fibre coordinates are scaled by it;
+* ``left(x, f, h)``: the same for σ_a(ε)⁻¹·g — the paper's −X⃗_a(g); g's source moves too;
 * ``predictor``: an explicit guess of the next fibre part from the previous elements,
   used to start Newton's method.
 
@@ -43,12 +44,32 @@ class Groupoid(ABC):
         """Coordinates of β(g) for g = (x, f)."""
 
     @abstractmethod
-    def right(self, x: Sequence[sp.Expr], f: Sequence[sp.Expr]) -> sp.Matrix:
+    def right(self, x: Sequence[sp.Expr], f: Sequence[sp.Expr], h: sp.Expr) -> sp.Matrix:
         """(m+n)×n matrix: column a is d/dε (x, f)(g·σ_a(ε)) at ε = 0."""
 
     @abstractmethod
-    def left(self, x: Sequence[sp.Expr], f: Sequence[sp.Expr]) -> sp.Matrix:
+    def left(self, x: Sequence[sp.Expr], f: Sequence[sp.Expr], h: sp.Expr) -> sp.Matrix:
         """(m+n)×n matrix: column a is d/dε (x, f)(σ_a(ε)⁻¹·g) at ε = 0."""
+
+    @abstractmethod
+    def continuous_symbols(self, order: int) -> tuple[sp.Symbol, ...]:
+        """Symbols a continuous Lagrangian of this order may use (besides parameters)."""
+
+    @abstractmethod
+    def leading_symbols(self, order: int) -> tuple[sp.Symbol, ...]:
+        """The highest derivatives of an order-``order`` Lagrangian (Legendre condition)."""
+
+    @abstractmethod
+    def default_discretisation(self, order: int) -> str:
+        """Name of the rule used when a model names none."""
+
+    @abstractmethod
+    def discrete_symbols(self, order: int) -> tuple[sp.Symbol, ...]:
+        """Symbols in which a discrete Lagrangian of this order is written directly."""
+
+    @abstractmethod
+    def discrete_mapping(self, order: int, xs, fs) -> dict:
+        """Map :meth:`discrete_symbols` to the coordinates of ``order`` composable slots."""
 
     @abstractmethod
     def predictor(self, xs: Sequence[Sequence[sp.Expr]],
@@ -63,6 +84,10 @@ class Groupoid(ABC):
     def element_dim(self) -> int:
         """Number of coordinates (x, f) of one element."""
         return self.source_dim + self.fibre_dim
+
+    def c_context(self) -> dict:
+        """Numbers the C templates need beyond the kernels (e.g. a Lie algebra basis)."""
+        return {"configuration_dim": 0}
 
     @property
     def nodes_are_unknowns(self) -> bool:

@@ -72,14 +72,31 @@ class PairGroupoid(Groupoid):
         """Nodes q_0, q_1, … of a window of consecutive elements (x_j, f_j)."""
         return [tuple(xs[0])] + [tuple(f) for f in fs]
 
+    def continuous_symbols(self, order):
+        return self.q + self.qdot + (self.qddot if order == 2 else ())
+
+    def leading_symbols(self, order):
+        return self.qddot if order == 2 else self.qdot
+
+    def default_discretisation(self, order):
+        return "three_point" if order == 2 else "midpoint"
+
+    def discrete_symbols(self, order):
+        return tuple(s for node in self.nodes(order + 1) for s in node)
+
+    def discrete_mapping(self, order, xs, fs):
+        nodes = self.window_nodes(xs, fs)
+        return {s: e for node, slot_node in zip(self.nodes(order + 1), nodes)
+                for s, e in zip(node, slot_node)}
+
     def target(self, x, f):
         return tuple(f)
 
-    def right(self, x, f):
+    def right(self, x, f, h):
         n = self.fibre_dim
         return sp.Matrix.vstack(sp.zeros(n, n), sp.eye(n))
 
-    def left(self, x, f):
+    def left(self, x, f, h):
         n = self.fibre_dim
         return sp.Matrix.vstack(sp.eye(n), sp.zeros(n, n))
 
