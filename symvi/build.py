@@ -35,18 +35,24 @@ MANIFEST = "symvi.json"
 COMPILE_ARGS = ["-O3", "-std=c99", "-fno-math-errno"]
 
 
+PACKAGE = Path(__file__).resolve().parent
+
+
 def _runtime_files() -> list[Path]:
-    root = Path(__file__).resolve().parent / "_runtime"
-    return sorted(root.glob("*.py"))
+    return sorted((PACKAGE / "_runtime").glob("*.py"))
 
 
 def cache_key(model: Model) -> str:
-    """Content hash of everything that determines the generated package."""
+    """Content hash of everything that determines the generated package.
+
+    The model, the templates, the compile flags, the symvi version and symvi's own
+    sources (the derivation code and the run-time files copied into the package).
+    """
     h = hashlib.sha256()
     for part in (__version__, templates_digest(), model.fingerprint(), " ".join(COMPILE_ARGS)):
         h.update(part.encode() + b"\0")
-    for path in _runtime_files():
-        h.update(path.read_bytes())
+    for path in sorted(PACKAGE.rglob("*.py")):
+        h.update(str(path.relative_to(PACKAGE)).encode() + path.read_bytes())
     return h.hexdigest()
 
 
@@ -114,6 +120,8 @@ def _info(dm: DerivedModel, key: str, description: str) -> dict:
         "fibre_dim": dm.fibre_dim, "parameters": [str(s) for s in dm.parameters],
         "defaults": list(dm.defaults), "has_energy": dm.has_energy,
         "bvp": dm.nodes_are_unknowns, "symvi_version": __version__, "key": key,
+        "configuration_dim": dm.c_context["configuration_dim"],
+        "matrix_dim": dm.c_context.get("matrix_dim", 0),
         "description": description,
         "kernels": {k.name: {"nz": len(k.z), "outputs": [len(M) for _, M in k.outputs]}
                     for k in dm.kernels},

@@ -51,7 +51,11 @@ def _run(args) -> int:
     if result.energy is not None and len(result.energy):
         e = result.energy
         print(f"energy     E_0 = {e[0]:.12g}, max |E − E_0| = {np.abs(e - e[0]).max():.3e}")
-    print(f"final      q = {np.array2string(result.q[-1], precision=6)}")
+    if result.g is not None:
+        print(f"final      xi = {np.array2string(result.f[-1], precision=6)}, "
+              f"g = {np.array2string(result.g[-1].ravel(), precision=6)}")
+    else:
+        print(f"final      q = {np.array2string(result.q[-1], precision=6)}")
     return 0 if result.success else 1
 
 

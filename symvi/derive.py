@@ -18,6 +18,7 @@ z = (x_0, f_0, …, f_{K−1}); later base points are substituted through β.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import Sequence
 
 import numpy as np
 import sympy as sp
@@ -56,6 +57,7 @@ class DerivedModel:
     nodes_are_unknowns: bool
     has_energy: bool
     fingerprint: str
+    c_context: dict
 
     @property
     def stencil_elements(self) -> int:
@@ -148,10 +150,23 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
                "L_d on one window of r elements"),
     ]
     if r == 1:
-        energy = -sp.diff(engine.lagrangian(one, 0), dm.step)
+        energy = _energy(dm, engine.lagrangian(one, 0), one.fs[0])
         kernels.append(Kernel("energy", one.z, (("value", sp.Matrix([energy])),),
                               "discrete energy E_d = −∂L_d/∂h (Kane, Marsden & Ortiz)"))
     return tuple(kernels)
+
+
+def _energy(dm: DiscreteModel, Ld: sp.Expr, f: Sequence[sp.Symbol]) -> sp.Expr:
+    """E_d = −∂L_d/∂h at a fixed groupoid element (Kane, Marsden & Ortiz).
+
+    Where the fibre coordinates are scaled by h (ξ = τ⁻¹(w)/h on a Lie group), holding
+    the element fixed means holding h·ξ fixed.
+    """
+    if not dm.groupoid.fibre_scales_with_step:
+        return -sp.diff(Ld, dm.step)
+    eta = sp.Dummy("eta", positive=True)
+    moved = Ld.xreplace({dm.step: eta} | {v: v * dm.step / eta for v in f})
+    return -sp.diff(moved, eta).xreplace({eta: dm.step})
 
 
 def _check_regular(dm: DiscreteModel, step: Kernel) -> None:
@@ -176,4 +191,5 @@ def derive(dm: DiscreteModel) -> DerivedModel:
     return DerivedModel(name=dm.name, kind=g.kind, order=dm.order, source_dim=g.source_dim,
                         fibre_dim=g.fibre_dim, parameters=dm.parameters, defaults=dm.defaults,
                         step=dm.step, kernels=kernels, nodes_are_unknowns=g.nodes_are_unknowns,
-                        has_energy=dm.order == 1, fingerprint=dm.fingerprint)
+                        has_energy=dm.order == 1, fingerprint=dm.fingerprint,
+                        c_context=g.c_context())

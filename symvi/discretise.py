@@ -65,6 +65,16 @@ def _three_point(groupoid, L, xs, fs, h):
                            (q2 - 2 * q1 + q0) / h**2)
 
 
+def _lie(groupoid, L, xs, fs, h):
+    return h * L.xreplace(dict(zip(groupoid.xi, fs[0])))
+
+
+def _lie_midpoint(groupoid, L, xs, fs, h):
+    x0, x1 = sp.Matrix(fs[0]), sp.Matrix(fs[1])
+    mapping = dict(zip(groupoid.xi, (x0 + x1) / 2)) | dict(zip(groupoid.xidot, (x1 - x0) / h))
+    return h * L.xreplace(mapping)
+
+
 #: Registry of discretisation rules by name.
 RULES: dict[str, Rule] = {
     "midpoint": Rule("midpoint", 1, "pair", _midpoint,
@@ -73,6 +83,9 @@ RULES: dict[str, Rule] = {
                       "L_d(q0, q1) = h/2 [L(q0, (q1-q0)/h) + L(q1, (q1-q0)/h)]"),
     "three_point": Rule("three_point", 2, "pair", _three_point,
                         "L_d(q0, q1, q2) = h L((q0+q1+q2)/3, (q2-q0)/2h, (q2-2q1+q0)/h^2)"),
+    "lie": Rule("lie", 1, "lie", _lie, "L_d(w) = h l(xi), xi = tau^-1(w)/h"),
+    "lie_midpoint": Rule("lie_midpoint", 2, "lie", _lie_midpoint,
+                         "L_d(w0, w1) = h L((xi0+xi1)/2, (xi1-xi0)/h) (paper eq. sdfinal)"),
 }
 
 

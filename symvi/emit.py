@@ -93,6 +93,7 @@ def emit(dm: DerivedModel) -> CSource:
         "K": dm.stencil_elements, "order": dm.order, "np": len(dm.parameters),
         "kernels": [_render_kernel(k, dm) for k in dm.kernels],
         "bvp": dm.nodes_are_unknowns,
+        **dm.c_context,
     }
     c_source = env.get_template("module.c.j2").render(**context)
     cdef = env.get_template("cdef.h.j2").render(**context)

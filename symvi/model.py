@@ -205,11 +205,10 @@ class Model:
     def _validate_example(self) -> None:
         if self.example is None:
             return
-        initial = np.asarray(self.example.initial, dtype=float)
-        expected = (2 * self.order, self.groupoid.fibre_dim)
-        if initial.shape != expected:
-            raise ModelError(f"example initial data of model {self.name!r} has shape "
-                             f"{initial.shape}, expected {expected} (2·order nodes)")
+        try:
+            self.groupoid.check_initial(self.example.initial, self.order)
+        except ModelError as exc:
+            raise ModelError(f"example initial data of model {self.name!r}: {exc}") from None
 
     # -- identity ---------------------------------------------------------------------
     def fingerprint(self) -> str:

@@ -10,6 +10,10 @@ from symvi.models import BUNDLED, get
 
 FIRST_ORDER = ("harmonic_oscillator", "pendulum", "double_pendulum")
 SECOND_ORDER = ("cubic_spline", "spline_potential")
+#: Bundled models on the pair groupoid (node-based oracle, Taylor consistency).
+PAIR = FIRST_ORDER + SECOND_ORDER
+#: Bundled models on matrix Lie groups.
+LIE = tuple(name for name in BUNDLED if name not in PAIR)
 
 
 @pytest.fixture(scope="session")
@@ -41,4 +45,4 @@ def derived():
     return get_derived
 
 
-__all__ = ["BUNDLED", "FIRST_ORDER", "SECOND_ORDER"]
+__all__ = ["BUNDLED", "FIRST_ORDER", "SECOND_ORDER", "PAIR", "LIE"]

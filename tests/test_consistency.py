@@ -18,7 +18,7 @@ from __future__ import annotations
 import pytest
 import sympy as sp
 
-from conftest import BUNDLED
+from conftest import PAIR
 from symvi import Model, PairGroupoid, h
 from symvi.consistency import (TIME, check_consistency, euler_lagrange, expand_residual,
                                residual_expansion)
@@ -71,12 +71,12 @@ def _equal(a, b):
     return all(sp.simplify(u - v) == 0 for u, v in zip(a, b))
 
 
-@pytest.mark.parametrize("name", BUNDLED)
+@pytest.mark.parametrize("name", PAIR)
 def test_euler_lagrange_expression(name):
     assert _equal(euler_lagrange(get(name)), _hand_written(name))
 
 
-@pytest.mark.parametrize("name", BUNDLED)
+@pytest.mark.parametrize("name", PAIR)
 def test_residual_is_consistent_with_euler_lagrange(name, derived):
     model = get(name)
     expansion = residual_expansion(model, derived=derived(name))

@@ -49,7 +49,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from conftest import BUNDLED
+from conftest import PAIR
 from symvi.models import get
 
 TOL = 1e-8
@@ -115,7 +115,7 @@ def _enforced(model, x):
     return list(range(r, E - r + 1))
 
 
-@pytest.mark.parametrize("name", BUNDLED)
+@pytest.mark.parametrize("name", PAIR)
 def test_computed_path_is_stationary(name, compiled):
     model, mod = get(name), compiled(name)
     x, f, h = _path(mod, model)
@@ -129,7 +129,7 @@ def test_computed_path_is_stationary(name, compiled):
         f"{out.relative[worst]:.3e}")
 
 
-@pytest.mark.parametrize("name", BUNDLED)
+@pytest.mark.parametrize("name", PAIR)
 def test_oracle_detects_a_perturbed_node(name, compiled):
     """Negative control: moving one node by 1e-3 breaks stationarity there (and only near)."""
     model, mod = get(name), compiled(name)
@@ -148,7 +148,7 @@ def test_oracle_detects_a_perturbed_node(name, compiled):
     assert max(far) < TOL
 
 
-@pytest.mark.parametrize("name", BUNDLED)
+@pytest.mark.parametrize("name", PAIR)
 def test_boundary_nodes_are_not_stationary(name, compiled):
     """The first and last r nodes lack windows, so the full action sum is not stationary
     there: this shows the oracle measures the sum, not a quantity that is always small.

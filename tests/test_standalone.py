@@ -69,7 +69,10 @@ CHILD = textwrap.dedent("""
     sys.path.insert(0, spec["dir"])
     import importlib
     mod = importlib.import_module(spec["name"])
-    r = mod.integrate(spec["initial"], spec["n_steps"], spec["h"])
+    initial = spec["initial"]
+    if mod.INFO["kind"] == "lie":
+        initial = tuple(initial)
+    r = mod.integrate(initial, spec["n_steps"], spec["h"])
     loaded = sorted(m for m in sys.modules if m.split(".")[0] in ("sympy", "symvi")
                     and sys.modules[m] is not None)
     print(json.dumps({"success": bool(r.success), "message": r.message,
@@ -79,7 +82,9 @@ CHILD = textwrap.dedent("""
 
 
 def run_standalone(directory: Path, name: str, initial, n_steps: int, h: float) -> dict:
-    spec = {"dir": str(directory), "name": name, "initial": np.asarray(initial).tolist(),
+    as_list = (lambda v: [np.asarray(a, dtype=float).tolist() for a in v]) \
+        if isinstance(initial, tuple) else (lambda v: np.asarray(v, dtype=float).tolist())
+    spec = {"dir": str(directory), "name": name, "initial": as_list(initial),
             "n_steps": int(n_steps), "h": float(h)}
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     proc = subprocess.run([sys.executable, "-c", CHILD, json.dumps(spec)], capture_output=True,

@@ -100,15 +100,19 @@ class CompiledModel:
         """Whole-trajectory solve with fixed end nodes; see :func:`bvp.solve_bvp`."""
         return solve_bvp(self, start, end, n_steps, h, params, **options)
 
-    def initial_stencil(self, initial) -> np.ndarray:
-        """Flatten initial data to the stencil prefix (x_0, f_0, …, f_{K−2})."""
-        K = self.stencil_elements
-        if self.info["kind"] == "pair":
+    def initial_state(self, initial) -> tuple[np.ndarray, np.ndarray]:
+        """Split initial data into the stencil prefix (x_0, f_0, …, f_{K−2}) and g_0."""
+        K, kind = self.stencil_elements, self.info["kind"]
+        if kind == "pair":
             nodes = arguments.finite_array(initial, (K, self.n),
                                            f"initial nodes (the first {K} nodes q_0..q_{K - 1})")
-            return nodes.reshape(-1)
-        x0, fibres = initial
-        x0 = arguments.finite_array(x0, (self.m,), "initial base point")
-        fibres = arguments.finite_array(fibres, (K - 1, self.n), "initial fibre parts")
-        return np.concatenate([x0, fibres.reshape(-1)])
-
+            return nodes.reshape(-1), np.zeros(1)
+        first, fibres = initial
+        fibres = arguments.finite_array(fibres, (K - 1, self.n),
+                                        f"initial increments (the first {K - 1} fibre parts)")
+        if kind == "lie":
+            d = self.info["matrix_dim"]
+            g0 = arguments.finite_array(first, (d, d), "initial configuration g_0")
+            return fibres.reshape(-1), g0.reshape(-1)
+        x0 = arguments.finite_array(first, (self.m,), "initial base point")
+        return np.concatenate([x0, fibres.reshape(-1)]), np.zeros(1)

@@ -19,6 +19,7 @@ class Status(enum.IntEnum):
     SINGULAR_JACOBIAN = 2
     NON_FINITE = 3
     STALLED = 4
+    OUTSIDE_CHART = 5
 
 
 class _Checkable:
@@ -38,7 +39,9 @@ class StepResult(_Checkable):
     t : (E+1,) times of the base points (node k at k·h).
     x : (E+1, m) base points α(E_0), β(E_0), …, β(E_{E−1}); for the pair groupoid the
         nodes q_k (also available as ``q``).
-    f : (E, n) fibre parts of the elements E_0, …, E_{E−1}.
+    f : (E, n) fibre parts of the elements E_0, …, E_{E−1} (Lie groups: ξ_k).
+    g : (E+1, d, d) reconstructed configurations g_{k+1} = g_k τ(hξ_k) on a matrix Lie
+        group, else None.
     momenta : discrete Legendre transforms at each state: (E+1, n) for first order
         (p_0 from F⁻L_d, p_k for k ≥ 1 from F⁺L_d), (E, 2, n) for second order (state k
         is the node pair (ν_k, ν_{k+1}); states 0, 1 from F⁻L_d, the rest from F⁺L_d).
@@ -53,6 +56,7 @@ class StepResult(_Checkable):
     t: np.ndarray
     x: np.ndarray
     f: np.ndarray
+    g: np.ndarray | None
     newton_iterations: np.ndarray
     status: Status
     message: str

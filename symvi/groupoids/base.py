@@ -20,7 +20,16 @@ from __future__ import annotations
 from abc import ABC, abstractmethod
 from typing import Sequence
 
+import numpy as np
 import sympy as sp
+
+from ..errors import ModelError
+
+
+def _shape(value, expected: tuple[int, ...], what: str) -> None:
+    shape = np.shape(value)
+    if shape != expected:
+        raise ModelError(f"{what} has shape {shape}, expected {expected}")
 
 
 class Groupoid(ABC):
@@ -28,6 +37,8 @@ class Groupoid(ABC):
 
     #: Short name of the groupoid kind, stored in generated modules' metadata.
     kind: str = "abstract"
+    #: True when fibre coordinates are an increment divided by h (ξ = τ⁻¹(w)/h).
+    fibre_scales_with_step: bool = False
 
     @property
     @abstractmethod
@@ -84,6 +95,12 @@ class Groupoid(ABC):
     def element_dim(self) -> int:
         """Number of coordinates (x, f) of one element."""
         return self.source_dim + self.fibre_dim
+
+    def check_initial(self, initial, order: int) -> None:
+        """Raise ModelError unless ``initial`` is valid step-map initial data."""
+        first, fibres = initial
+        _shape(first, (self.source_dim,), "initial base point")
+        _shape(fibres, (2 * order - 1, self.fibre_dim), "initial fibre parts")
 
     def c_context(self) -> dict:
         """Numbers the C templates need beyond the kernels (e.g. a Lie algebra basis)."""

@@ -6,7 +6,7 @@ from typing import Sequence
 import sympy as sp
 
 from ..errors import ModelError
-from .base import Groupoid
+from .base import Groupoid, _shape
 
 
 def _names(coordinates: str | Sequence[str]) -> tuple[str, ...]:
@@ -88,6 +88,9 @@ class PairGroupoid(Groupoid):
         nodes = self.window_nodes(xs, fs)
         return {s: e for node, slot_node in zip(self.nodes(order + 1), nodes)
                 for s, e in zip(node, slot_node)}
+
+    def check_initial(self, initial, order):
+        _shape(initial, (2 * order, self.fibre_dim), f"the first {2 * order} nodes (2·order)")
 
     def target(self, x, f):
         return tuple(f)

@@ -12,7 +12,7 @@ from ..errors import ModelError
 from ..model import Model
 
 BUNDLED = ("harmonic_oscillator", "pendulum", "double_pendulum", "cubic_spline",
-           "spline_potential")
+           "spline_potential", "rigid_body")
 
 
 def get(name: str) -> Model:

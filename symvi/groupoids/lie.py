@@ -1,0 +1,180 @@
+"""Matrix Lie groups G ⇉ {e}, declared by a basis of their Lie algebra (paper §2.2, DESIGN.md §2).
+
+An element is w = τ(hξ) with τ a retraction g → G; its fibre coordinates are ξ ∈ Rⁿ in the
+declared basis E_1, …, E_n and its source is the single point e (source_dim 0). With
+dτ⁻¹ the right-trivialised inverse derivative of τ, the variations of DESIGN.md §2 are
+
+    right(w, a) = (1/h)·dτ⁻¹_{−hξ}(E_a),      left(w, a) = −(1/h)·dτ⁻¹_{hξ}(E_a),
+
+so the first-order residual is the discrete Euler–Poincaré equation
+(dτ⁻¹_{−hξ_k})*μ_k − (dτ⁻¹_{hξ_{k+1}})*μ_{k+1} = 0, μ = ∂l/∂ξ (end of paper §2, with the
+signs of ERRATA.md item 7).
+
+Retraction: the Cayley map cay(X) = (I − X/2)⁻¹(I + X/2) of any quadratic matrix group,
+whose inverse derivative dcay⁻¹_X(Y) = (I − X/2) Y (I + X/2) is polynomial; results are
+projected onto the basis with its dual basis.
+"""
+from __future__ import annotations
+
+from typing import Sequence
+
+import sympy as sp
+
+from ..errors import ModelError
+from .base import Groupoid, _shape
+
+
+def _symbol_names(names, n: int, default: str) -> tuple[str, ...]:
+    if names is None:
+        return tuple(f"{default}{i + 1}" for i in range(n))
+    names = tuple(names.replace(",", " ").split() if isinstance(names, str) else names)
+    if len(names) != n:
+        raise ModelError(f"{len(names)} names given for a Lie algebra of dimension {n}")
+    if len(set(names)) != n or not all(s.isidentifier() for s in names):
+        raise ModelError(f"Lie algebra coordinate names must be distinct identifiers: {names}")
+    return names
+
+
+class MatrixLieGroup(Groupoid):
+    """A matrix Lie group with the Cayley retraction, as a groupoid over a point.
+
+    Parameters
+    ----------
+    basis:
+        Square matrices E_a spanning the Lie algebra; they must be linearly independent and
+        close under the commutator (checked exactly).
+    names:
+        Names of the coordinates ξ_a (continuous symbols ``xi``; second-order models also
+        use ``xidot``).
+    label:
+        Name of the group for messages and fingerprints.
+    """
+
+    kind = "lie"
+    fibre_scales_with_step = True
+
+    def __init__(self, basis: Sequence, names=None, label: str = "G"):
+        self.label = label
+        self.basis = tuple(sp.Matrix(E) for E in basis)
+        if not self.basis:
+            raise ModelError(f"{label}: empty Lie algebra basis")
+        d = self.basis[0].shape[0]
+        if any(E.shape != (d, d) for E in self.basis):
+            raise ModelError(f"{label}: basis matrices must all be square of the same size")
+        self.matrix_dim = d
+        B = sp.Matrix.hstack(*[E.reshape(d * d, 1) for E in self.basis])
+        if B.rank() < len(self.basis):
+            raise ModelError(f"{label}: the basis matrices are linearly dependent")
+        self._dual = (B.T * B).inv() * B.T
+        self.structure_constants = self._closure()
+        self.names = _symbol_names(names, len(self.basis), "xi")
+        self.xi = tuple(sp.Symbol(n, real=True) for n in self.names)
+        self.xidot = tuple(sp.Symbol(f"{n}_dot", real=True) for n in self.names)
+
+    def __repr__(self) -> str:
+        return f"MatrixLieGroup({self.label}, dim {len(self.basis)})"
+
+    # -- algebra --------------------------------------------------------------------------
+    def coordinates(self, M: sp.Matrix) -> sp.Matrix:
+        """Coordinates of an algebra element in the basis (dual-basis projection)."""
+        return self._dual * sp.Matrix(M).reshape(self.matrix_dim ** 2, 1)
+
+    def hat(self, v) -> sp.Matrix:
+        """Σ v_a E_a."""
+        return sum((vi * E for vi, E in zip(v, self.basis)), sp.zeros(self.matrix_dim))
+
+    def _closure(self):
+        n, constants = len(self.basis), {}
+        for a in range(n):
+            for b in range(a + 1, n):
+                bracket = self.basis[a] * self.basis[b] - self.basis[b] * self.basis[a]
+                c = self.coordinates(bracket)
+                if (self.hat(c) - bracket).applyfunc(sp.simplify) != sp.zeros(self.matrix_dim):
+                    raise ModelError(
+                        f"{self.label}: the basis does not close under the bracket: "
+                        f"[E{a + 1}, E{b + 1}] = {bracket.tolist()} is not in its span")
+                constants[(a, b)] = tuple(c)
+        return constants
+
+    def dtau_inv(self, x) -> sp.Matrix:
+        """Matrix of dcay⁻¹_X (right-trivialised), X = Σ x_a E_a, in the basis."""
+        X, eye = self.hat(x), sp.eye(self.matrix_dim)
+        return sp.Matrix.hstack(*[self.coordinates((eye - X / 2) * E * (eye + X / 2))
+                                  for E in self.basis]).applyfunc(sp.expand)
+
+    # -- groupoid interface ---------------------------------------------------------------
+    @property
+    def source_dim(self) -> int:
+        return 0
+
+    @property
+    def fibre_dim(self) -> int:
+        return len(self.basis)
+
+    def target(self, x, f):
+        return ()
+
+    def right(self, x, f, h):
+        return self.dtau_inv([-h * v for v in f]) / h
+
+    def left(self, x, f, h):
+        return -self.dtau_inv([h * v for v in f]) / h
+
+    def predictor(self, xs, fs):
+        return tuple(2 * a - b for a, b in zip(fs[-1], fs[-2])) if len(fs) > 1 else tuple(fs[-1])
+
+    def continuous_symbols(self, order):
+        return self.xi + (self.xidot if order == 2 else ())
+
+    def leading_symbols(self, order):
+        return self.xidot if order == 2 else self.xi
+
+    def default_discretisation(self, order):
+        return "lie_midpoint" if order == 2 else "lie"
+
+    def discrete_symbols(self, order):
+        return tuple(sp.Symbol(f"{n}_{k}", real=True) for k in range(order) for n in self.names)
+
+    def discrete_mapping(self, order, xs, fs):
+        return dict(zip(self.discrete_symbols(order), [v for f in fs for v in f]))
+
+    def check_initial(self, initial, order):
+        g0, fibres = initial
+        d = self.matrix_dim
+        _shape(g0, (d, d), "initial configuration g_0")
+        _shape(fibres, (2 * order - 1, self.fibre_dim), "initial increments ξ")
+
+    def fingerprint(self) -> str:
+        return f"lie:{self.label}:cayley:{[E.tolist() for E in self.basis]}:{self.names}"
+
+    def c_context(self) -> dict:
+        return {"configuration_dim": self.matrix_dim ** 2, "matrix_dim": self.matrix_dim,
+                "basis": [[float(v) for v in E] for E in self.basis]}
+
+
+def _hat3(v):
+    return sp.Matrix([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
+
+
+def SO3(names="Omega1 Omega2 Omega3") -> MatrixLieGroup:
+    """SO(3) with the hat basis of so(3) ≅ R³ (ξ = body angular velocity Ω)."""
+    return MatrixLieGroup([_hat3(sp.eye(3)[:, i]) for i in range(3)], names, "SO3")
+
+
+def SE2(names="omega v1 v2") -> MatrixLieGroup:
+    """SE(2) as 3×3 homogeneous matrices: rotation rate ω and body velocity (v1, v2)."""
+    E = [sp.Matrix([[0, -1, 0], [1, 0, 0], [0, 0, 0]]),
+         sp.Matrix([[0, 0, 1], [0, 0, 0], [0, 0, 0]]),
+         sp.Matrix([[0, 0, 0], [0, 0, 1], [0, 0, 0]])]
+    return MatrixLieGroup(E, names, "SE2")
+
+
+def SE3(names="Omega1 Omega2 Omega3 V1 V2 V3") -> MatrixLieGroup:
+    """SE(3) as 4×4 homogeneous matrices: body angular velocity Ω and linear velocity V."""
+    def twist(w, v):
+        M = sp.zeros(4)
+        M[:3, :3], M[:3, 3] = _hat3(w), sp.Matrix(v)
+        return M
+    e = [list(sp.eye(3)[:, i]) for i in range(3)]
+    return MatrixLieGroup([twist(ei, [0, 0, 0]) for ei in e] + [twist([0, 0, 0], ei) for ei in e],
+                          names, "SE3")
