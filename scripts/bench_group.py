@@ -36,7 +36,7 @@ import sympy as sp  # noqa: E402
 from scipy.optimize import root  # noqa: E402
 
 from bench_step import BASELINE_REPEATS, BASELINE_STEPS, C_REPEATS, C_STEPS  # noqa: E402
-from bench_step import RESIDUAL_OK, best_time  # noqa: E402
+from bench_step import RESIDUAL_OK, best_time, report  # noqa: E402
 from symvi.build import compile_model  # noqa: E402
 from symvi.derive import derive  # noqa: E402
 from symvi.discretise import discretise  # noqa: E402
@@ -111,16 +111,8 @@ def bench(name: str, build_dir: Path) -> float:
     diff_xi = float(np.abs(result.f[: BASELINE_STEPS + 1] - xi_baseline).max())
     diff_R = float(np.abs(result.g[: BASELINE_STEPS + 2] - R_baseline).max())
 
-    ratio = c_rate / base_rate
-    print(f"{name}:")
-    print(f"  compile (force=True)  {compile_time:8.2f} s")
-    print(f"  C loop                {c_rate:12,.0f} steps/s  ({C_STEPS:,} steps, "
-          f"mean {result.newton_iterations.mean():.2f} Newton iterations)")
-    print(f"  baseline              {base_rate:12,.0f} steps/s  ({BASELINE_STEPS:,} steps)")
-    print(f"  ratio                 {ratio:12.1f}")
-    print(f"  max |ξ_C - ξ_base|    {diff_xi:12.2e}  (over {BASELINE_STEPS:,} steps)")
-    print(f"  max |R_C - R_base|    {diff_R:12.2e}  (over {BASELINE_STEPS:,} steps)")
-    return ratio
+    return report(name, compile_time, c_rate, base_rate, result.newton_iterations,
+                  {"ξ": diff_xi, "R": diff_R})
 
 
 def main() -> None:

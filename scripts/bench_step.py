@@ -116,14 +116,23 @@ def bench(name: str, build_dir: Path) -> float:
         lambda: stepper(initial, BASELINE_STEPS, h), BASELINE_REPEATS)
     diff = float(np.abs(result.q[: BASELINE_STEPS + 2] - q_baseline).max())
 
+    return report(name, compile_time, c_rate, base_rate, result.newton_iterations,
+                  {"q": diff})
+
+
+def report(name: str, compile_time: float, c_rate: float, base_rate: float,
+           iterations: np.ndarray, differences: dict[str, float]) -> float:
+    """Print one model's timings and trajectory differences; return the speed ratio."""
     ratio = c_rate / base_rate
     print(f"{name}:")
     print(f"  compile (force=True)  {compile_time:8.2f} s")
     print(f"  C loop                {c_rate:12,.0f} steps/s  ({C_STEPS:,} steps, "
-          f"mean {result.newton_iterations.mean():.2f} Newton iterations)")
+          f"mean {iterations.mean():.2f} Newton iterations)")
     print(f"  baseline              {base_rate:12,.0f} steps/s  ({BASELINE_STEPS:,} steps)")
     print(f"  ratio                 {ratio:12.1f}")
-    print(f"  max |q_C - q_base|    {diff:12.2e}  (over {BASELINE_STEPS:,} steps)")
+    for label, diff in differences.items():
+        print(f"  max |{label}_C - {label}_base|{' ' * (4 - len(label))}{diff:12.2e}  "
+              f"(over {BASELINE_STEPS:,} steps)")
     return ratio
 
 

@@ -123,7 +123,7 @@ def _stack(vectors) -> sp.Matrix:
 
 
 def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
-    engine, r, n = _Engine(dm), dm.order, dm.groupoid.fibre_dim
+    engine, r = _Engine(dm), dm.order
     full = _stencil(dm, 2 * r)
     residual = engine.variation(full, r, range(r + 1))
     unknown = full.fs[-1]

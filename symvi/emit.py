@@ -72,7 +72,7 @@ def _render_kernel(kernel: Kernel, dm: DerivedModel) -> dict:
     printer = ArrayPrinter(names)
     flat = [e for _, M in kernel.outputs for e in M]
     temporaries, reduced = sp.cse(flat, symbols=sp.numbered_symbols("t"), order="none")
-    assignments, position = [], 0
+    position = 0
     outputs = []
     for out_name, M in kernel.outputs:
         lines = []
