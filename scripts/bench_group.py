@@ -32,14 +32,11 @@ from pathlib import Path  # noqa: E402
 from typing import Callable  # noqa: E402
 
 import numpy as np  # noqa: E402
-import sympy as sp  # noqa: E402
 from scipy.optimize import root  # noqa: E402
 
 from bench_step import BASELINE_REPEATS, BASELINE_STEPS, C_REPEATS, C_STEPS  # noqa: E402
-from bench_step import RESIDUAL_OK, best_time, report  # noqa: E402
+from bench_step import RESIDUAL_OK, best_time, lambdified_step, report  # noqa: E402
 from symvi.build import compile_model  # noqa: E402
-from symvi.derive import derive  # noqa: E402
-from symvi.discretise import discretise  # noqa: E402
 from symvi.model import Model  # noqa: E402
 from symvi.models import get  # noqa: E402
 
@@ -58,14 +55,7 @@ def cay(v: np.ndarray) -> np.ndarray:
 def baseline_stepper(model: Model) -> GroupStepper:
     """Step map from lambdified residual/Jacobian, solved by ``scipy.optimize.root``,
     with the reconstruction R_{k+1} = R_k·cay(hξ_k) in NumPy."""
-    dm = derive(discretise(model))
-    kernel = dm.kernel("step")
-    outputs = dict(kernel.outputs)
-    n = outputs["residual"].shape[0]
-    args = [*kernel.z, *dm.parameters, dm.step]
-    residual = sp.lambdify(args, list(outputs["residual"]), modules="numpy")
-    jacobian = sp.lambdify(args, outputs["jacobian"].tolist(), modules="numpy")
-    params = list(dm.defaults)
+    residual, jacobian, params, n = lambdified_step(model)
 
     def integrate(R0: np.ndarray, xi0: np.ndarray, n_steps: int,
                   h: float) -> tuple[np.ndarray, np.ndarray]:

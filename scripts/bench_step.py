@@ -67,16 +67,23 @@ def best_time(run: Callable[[], object], repeats: int) -> float:
     return min(times)
 
 
-def baseline_stepper(model: Model) -> Stepper:
-    """Step map from lambdified residual/Jacobian, solved by ``scipy.optimize.root``."""
+def lambdified_step(model: Model):
+    """The ``step`` kernel's residual and Jacobian as NumPy functions of (z, p, h).
+
+    Returns (residual, jacobian, default parameters, fibre dimension n).
+    """
     dm = derive(discretise(model))
     kernel = dm.kernel("step")
     outputs = dict(kernel.outputs)
-    n = outputs["residual"].shape[0]
     args = [*kernel.z, *dm.parameters, dm.step]
     residual = sp.lambdify(args, list(outputs["residual"]), modules="numpy")
     jacobian = sp.lambdify(args, outputs["jacobian"].tolist(), modules="numpy")
-    params = list(dm.defaults)
+    return residual, jacobian, list(dm.defaults), outputs["residual"].shape[0]
+
+
+def baseline_stepper(model: Model) -> Stepper:
+    """Step map from lambdified residual/Jacobian, solved by ``scipy.optimize.root``."""
+    residual, jacobian, params, n = lambdified_step(model)
 
     def integrate(initial: np.ndarray, n_steps: int, h: float) -> np.ndarray:
         q = np.empty((n_steps + 2, n))

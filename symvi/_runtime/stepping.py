@@ -55,6 +55,7 @@ def integrate(model, initial, n_steps: int, h: float, params=None, *, maxiter: i
         message = (f"step {steps} (to t = {(K + steps) * h:.6g}) failed: {reason}; "
                    f"residual norm {rnorm[0]:.3e}")
         x, f, g = x[: K + steps], f[: K - 1 + steps], g[: K + steps]
+
     def along(quantity: str):
         if quantity == "momenta":
             return model.momenta(x, f, h, params)
