@@ -121,7 +121,7 @@ def _info(dm: DerivedModel, key: str, description: str) -> dict:
         "defaults": list(dm.defaults), "has_energy": dm.has_energy,
         "bvp": dm.nodes_are_unknowns, "symvi_version": __version__, "key": key,
         "configuration_dim": dm.c_context["configuration_dim"],
-        "matrix_dim": dm.c_context.get("matrix_dim", 0),
+        "matrix_dims": [G["matrix_dim"] for G in dm.c_context["groups"]],
         "description": description,
         "kernels": {k.name: {"nz": len(k.z), "outputs": [len(M) for _, M in k.outputs]}
                     for k in dm.kernels},

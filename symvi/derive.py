@@ -13,7 +13,11 @@ Legendre transforms F⁺L_d (−F⁻L_d) — the momenta of Appendix B for r = 1
 r = 2; on a solution the two agree, which is the residual vanishing.
 
 Kernels are described on a *stencil* of K consecutive elements, with coordinates
-z = (x_0, f_0, …, f_{K−1}); later base points are substituted through β.
+z = (x_0, f_0, …, f_{K−1}). Later base points x_j = β(x_{j−1}, f_{j−1}) are substituted
+when β is a plain coordinate (the pair groupoid) and otherwise kept as named intermediate
+quantities of the kernel (``definitions``), with the chain rule applied through them:
+substituting a nonlinear β (an action through τ(hξ)) into every derivative makes the
+expressions grow many-fold.
 """
 from __future__ import annotations
 
@@ -25,7 +29,8 @@ import sympy as sp
 
 from .discretise import DiscreteModel
 from .errors import ModelError
-from .rank import generic_rank
+from .groupoids.analytic import used_coefficients
+from .rank import generic_rank, sequential_lambdify
 
 
 @dataclass(frozen=True)
@@ -39,6 +44,22 @@ class Kernel:
     z: tuple[sp.Symbol, ...]
     outputs: tuple[tuple[str, sp.Matrix], ...]
     doc: str
+    #: Intermediate quantities (symbol, expression), in evaluation order; outputs and
+    #: later definitions may use the symbols.
+    definitions: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()
+
+    def expanded(self) -> tuple[tuple[str, sp.Matrix], ...]:
+        """The outputs as expressions of z alone (definitions substituted)."""
+        outputs = self.outputs
+        for symbol, expr in reversed(self.definitions):
+            outputs = tuple((n, M.xreplace({symbol: expr})) for n, M in outputs)
+        return outputs
+
+    def numeric(self, args: Sequence[sp.Symbol]):
+        """A NumPy function of ``args`` (z, parameters, h) returning the flat outputs,
+        evaluating the definitions in order (used by checks and tests)."""
+        return sequential_lambdify(args, self.definitions,
+                                   [e for _, M in self.outputs for e in M])
 
 
 @dataclass(frozen=True, eq=False)
@@ -58,6 +79,8 @@ class DerivedModel:
     has_energy: bool
     fingerprint: str
     c_context: dict
+    #: Analytic coefficient functions (exponential retraction) the C must define.
+    coefficients: tuple = ()
 
     @property
     def stencil_elements(self) -> int:
@@ -73,6 +96,35 @@ class _Stencil:
     z: tuple[sp.Symbol, ...]
     xs: tuple[tuple[sp.Expr, ...], ...]
     fs: tuple[tuple[sp.Symbol, ...], ...]
+    #: Named base points x_j = β(x_{j−1}, f_{j−1}), then the entries of their Jacobians.
+    definitions: tuple[tuple[sp.Symbol, sp.Expr], ...]
+    jacobian_definitions: tuple[tuple[sp.Symbol, sp.Expr], ...]
+    #: dx_j/dz for every base point (entries are expressions or definition symbols).
+    source_jacobians: tuple[sp.Matrix, ...]
+
+    def total_jacobian(self, R: sp.Matrix) -> sp.Matrix:
+        """dR/dz, with the chain rule through the named base points."""
+        J = R.jacobian(self.z)
+        named = {s for s, _ in self.definitions}
+        for x, D in zip(self.xs[1:], self.source_jacobians[1:]):
+            if x and x[0] in named:
+                J += R.jacobian(x) * D
+        return J
+
+
+def _selector(symbols, z) -> sp.Matrix:
+    return sp.Matrix(len(symbols), len(z), lambda i, j: int(z[j] == symbols[i]))
+
+
+def _name_entries(E: sp.Matrix, prefix: str, out: list) -> sp.Matrix:
+    """Replace the non-constant entries of E by fresh symbols recorded in ``out``."""
+    def entry(i, j):
+        if E[i, j].is_number:
+            return E[i, j]
+        symbol = sp.Dummy(f"{prefix}_{i}_{j}", real=True)
+        out.append((symbol, E[i, j]))
+        return symbol
+    return sp.Matrix(E.shape[0], E.shape[1], entry)
 
 
 def _stencil(dm: DiscreteModel, elements: int) -> _Stencil:
@@ -80,10 +132,26 @@ def _stencil(dm: DiscreteModel, elements: int) -> _Stencil:
     x0 = tuple(sp.Dummy(f"x_{i}", real=True) for i in range(g.source_dim))
     fs = tuple(tuple(sp.Dummy(f"f{k}_{i}", real=True) for i in range(g.fibre_dim))
                for k in range(elements))
-    xs = [x0]
+    z = x0 + tuple(s for f in fs for s in f)
+    xs, definitions, jacobian_definitions = [x0], [], []
+    D = [_selector(x0, z)]
     for k in range(elements - 1):
-        xs.append(tuple(g.target(xs[-1], fs[k])))
-    return _Stencil(x0 + tuple(s for f in fs for s in f), tuple(xs), fs)
+        if not x0:
+            xs.append(())
+            D.append(D[0])
+            continue
+        beta = sp.Matrix(g.target(xs[-1], fs[k], dm.step))
+        E = beta.jacobian(xs[-1]) * D[-1] + beta.jacobian(fs[k]) * _selector(fs[k], z)
+        if all(isinstance(v, sp.Symbol) for v in beta):
+            xs.append(tuple(beta))
+            D.append(E)
+            continue
+        named = tuple(sp.Dummy(f"x{k + 1}_{i}", real=True) for i in range(len(x0)))
+        definitions += list(zip(named, beta))
+        xs.append(named)
+        D.append(_name_entries(E, f"Dx{k + 1}", jacobian_definitions))
+    return _Stencil(z, tuple(xs), fs, tuple(definitions), tuple(jacobian_definitions),
+                    tuple(D))
 
 
 class _Engine:
@@ -123,31 +191,36 @@ def _stack(vectors) -> sp.Matrix:
 
 
 def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
-    engine, r = _Engine(dm), dm.order
+    engine, r, g = _Engine(dm), dm.order, dm.groupoid
     full = _stencil(dm, 2 * r)
     residual = engine.variation(full, r, range(r + 1))
     unknown = full.fs[-1]
-    guess = sp.Matrix(dm.groupoid.predictor(full.xs[:-1], full.fs[:-1]))
+    guess = sp.Matrix(g.predictor(full.xs[:-1], full.fs[:-1]))
     one = _stencil(dm, 1)
     half = _stencil(dm, 2 * r - 1)
     p_plus = _stack([engine.variation(half, j, range(r)) for j in range(r, 2 * r)])
     p_minus = -_stack([engine.variation(half, j, range(r)) for j in range(r)])
     window = _stencil(dm, r)
+    stencil_jacobian = full.total_jacobian(residual)
+    target = sp.Matrix(g.target(one.xs[0], one.fs[0], dm.step))
     kernels = [
         Kernel("step", full.z, (("residual", residual), ("jacobian", residual.jacobian(unknown))),
-               "discrete Euler–Lagrange residual at the middle node and ∂R/∂f_{K−1}"),
-        Kernel("stencil", full.z, (("residual", residual), ("jacobian", residual.jacobian(full.z))),
-               "residual and its Jacobian with respect to every stencil coordinate"),
+               "discrete Euler–Lagrange residual at the middle node and ∂R/∂f_{K−1}",
+               full.definitions),
+        Kernel("stencil", full.z, (("residual", residual), ("jacobian", stencil_jacobian)),
+               "residual and its Jacobian with respect to every stencil coordinate",
+               full.definitions + full.jacobian_definitions),
         Kernel("predict", full.z, (("guess", guess),),
-               "explicit guess of f_{K−1} from the earlier elements"),
-        Kernel("target", one.z, (("target", sp.Matrix(dm.groupoid.target(one.xs[0], one.fs[0]))),),
-               "β(x, f)"),
+               "explicit guess of f_{K−1} from the earlier elements", full.definitions),
+        Kernel("target", one.z, (("target", target),), "β(x, f)"),
         Kernel("momentum_plus", half.z, (("momentum", p_plus),),
-               "F⁺L_d: momenta at the last r nodes from the 2r−1 elements before them"),
+               "F⁺L_d: momenta at the last r nodes from the 2r−1 elements before them",
+               half.definitions),
         Kernel("momentum_minus", half.z, (("momentum", p_minus),),
-               "F⁻L_d: momenta at the first r nodes from the 2r−1 elements after them"),
+               "F⁻L_d: momenta at the first r nodes from the 2r−1 elements after them",
+               half.definitions),
         Kernel("lagrangian", window.z, (("value", sp.Matrix([engine.lagrangian(window, 0)])),),
-               "L_d on one window of r elements"),
+               "L_d on one window of r elements", window.definitions),
     ]
     if r == 1:
         energy = _energy(dm, engine.lagrangian(one, 0), one.fs[0])
@@ -159,13 +232,12 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
 def _energy(dm: DiscreteModel, Ld: sp.Expr, f: Sequence[sp.Symbol]) -> sp.Expr:
     """E_d = −∂L_d/∂h at a fixed groupoid element (Kane, Marsden & Ortiz).
 
-    Where the fibre coordinates are scaled by h (ξ = τ⁻¹(w)/h on a Lie group), holding
+    Where fibre coordinates are scaled by h (ξ = τ⁻¹(w)/h on a Lie group), holding
     the element fixed means holding h·ξ fixed.
     """
-    if not dm.groupoid.fibre_scales_with_step:
-        return -sp.diff(Ld, dm.step)
     eta = sp.Dummy("eta", positive=True)
-    moved = Ld.xreplace({dm.step: eta} | {v: v * dm.step / eta for v in f})
+    scaled = {v: v * dm.step / eta for v, s in zip(f, dm.groupoid.step_scaled()) if s}
+    moved = Ld.xreplace({dm.step: eta} | scaled)
     return -sp.diff(moved, eta).xreplace({eta: dm.step})
 
 
@@ -174,7 +246,7 @@ def _check_regular(dm: DiscreteModel, step: Kernel) -> None:
     jac = dict(step.outputs)["jacobian"]
     rng = np.random.default_rng(7)
     fixed = dict(zip(dm.parameters, dm.defaults)) | {dm.step: float(rng.uniform(0.05, 0.2))}
-    rank, n = generic_rank(jac, step.z, fixed), jac.shape[0]
+    rank, n = generic_rank(jac, step.z, fixed, definitions=step.definitions), jac.shape[0]
     if rank is not None and rank < n:
         which = "D₁₂L_d" if dm.order == 1 else "D₁₃L_d"
         raise ModelError(
@@ -188,8 +260,12 @@ def derive(dm: DiscreteModel) -> DerivedModel:
     kernels = _kernels(dm)
     _check_regular(dm, kernels[0])
     g = dm.groupoid
+    expressions = [e for k in kernels for _, M in k.outputs for e in M] \
+        + [e for k in kernels for _, e in k.definitions]
+    coefficients = set(used_coefficients(expressions)) | set(g.coefficient_functions())
     return DerivedModel(name=dm.name, kind=g.kind, order=dm.order, source_dim=g.source_dim,
                         fibre_dim=g.fibre_dim, parameters=dm.parameters, defaults=dm.defaults,
                         step=dm.step, kernels=kernels, nodes_are_unknowns=g.nodes_are_unknowns,
                         has_energy=dm.order == 1, fingerprint=dm.fingerprint,
-                        c_context=g.c_context())
+                        c_context=g.c_context(),
+                        coefficients=tuple(sorted(coefficients, key=lambda c: c.__name__)))

@@ -8,7 +8,7 @@ groupoid shares it.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import TYPE_CHECKING, Callable
+from typing import TYPE_CHECKING
 
 import sympy as sp
 
@@ -25,68 +25,37 @@ h = sp.Symbol("h", positive=True)
 
 @dataclass(frozen=True)
 class Rule:
-    """A named discretisation: ``build(groupoid, L, xs, fs, h)`` returns L_d.
+    """A named discretisation of a given order (DESIGN.md §3).
 
-    ``xs``, ``fs`` are the source and fibre coordinates of the rule's ``order`` slots.
+    The groupoid supplies its quadrature (:meth:`Groupoid.quadrature`): weighted points
+    (w_i, substitution of the continuous symbols) with L_d = h Σ w_i L(point_i).
     """
 
     name: str
     order: int
-    kind: str
-    build: Callable[..., sp.Expr]
     summary: str
 
     def applies_to(self, groupoid: Groupoid) -> bool:
-        return groupoid.kind == self.kind
+        return self.name in groupoid.rules(self.order)
 
-
-
-def _substitute(L, groupoid, q, v, a=None):
-    mapping = dict(zip(groupoid.q, q)) | dict(zip(groupoid.qdot, v))
-    if a is not None:
-        mapping |= dict(zip(groupoid.qddot, a))
-    return L.xreplace(mapping)
-
-
-def _midpoint(groupoid, L, xs, fs, h):
-    q0, q1 = (sp.Matrix(n) for n in groupoid.window_nodes(xs, fs))
-    return h * _substitute(L, groupoid, (q0 + q1) / 2, (q1 - q0) / h)
-
-
-def _trapezoid(groupoid, L, xs, fs, h):
-    q0, q1 = (sp.Matrix(n) for n in groupoid.window_nodes(xs, fs))
-    v = (q1 - q0) / h
-    return h / 2 * (_substitute(L, groupoid, q0, v) + _substitute(L, groupoid, q1, v))
-
-
-def _three_point(groupoid, L, xs, fs, h):
-    q0, q1, q2 = (sp.Matrix(n) for n in groupoid.window_nodes(xs, fs))
-    return h * _substitute(L, groupoid, (q0 + q1 + q2) / 3, (q2 - q0) / (2 * h),
-                           (q2 - 2 * q1 + q0) / h**2)
-
-
-def _lie(groupoid, L, xs, fs, h):
-    return h * L.xreplace(dict(zip(groupoid.xi, fs[0])))
-
-
-def _lie_midpoint(groupoid, L, xs, fs, h):
-    x0, x1 = sp.Matrix(fs[0]), sp.Matrix(fs[1])
-    mapping = dict(zip(groupoid.xi, (x0 + x1) / 2)) | dict(zip(groupoid.xidot, (x1 - x0) / h))
-    return h * L.xreplace(mapping)
+    def build(self, groupoid: Groupoid, L: sp.Expr, xs, fs, step: sp.Expr) -> sp.Expr:
+        return step * sum(w * L.xreplace(point)
+                          for w, point in groupoid.quadrature(self.name, xs, fs, step))
 
 
 #: Registry of discretisation rules by name.
-RULES: dict[str, Rule] = {
-    "midpoint": Rule("midpoint", 1, "pair", _midpoint,
-                     "L_d(q0, q1) = h L((q0+q1)/2, (q1-q0)/h)"),
-    "trapezoid": Rule("trapezoid", 1, "pair", _trapezoid,
-                      "L_d(q0, q1) = h/2 [L(q0, (q1-q0)/h) + L(q1, (q1-q0)/h)]"),
-    "three_point": Rule("three_point", 2, "pair", _three_point,
-                        "L_d(q0, q1, q2) = h L((q0+q1+q2)/3, (q2-q0)/2h, (q2-2q1+q0)/h^2)"),
-    "lie": Rule("lie", 1, "lie", _lie, "L_d(w) = h l(xi), xi = tau^-1(w)/h"),
-    "lie_midpoint": Rule("lie_midpoint", 2, "lie", _lie_midpoint,
-                         "L_d(w0, w1) = h L((xi0+xi1)/2, (xi1-xi0)/h) (paper eq. sdfinal)"),
-}
+RULES: dict[str, Rule] = {r.name: r for r in (
+    Rule("midpoint", 1, "pair: L_d(q0, q1) = h L((q0+q1)/2, (q1-q0)/h)"),
+    Rule("trapezoid", 1, "pair: L_d(q0, q1) = h/2 [L(q0, (q1-q0)/h) + L(q1, (q1-q0)/h)]"),
+    Rule("three_point", 2,
+         "pair: L_d(q0, q1, q2) = h L((q0+q1+q2)/3, (q2-q0)/2h, (q2-2q1+q0)/h^2)"),
+    Rule("lie", 1, "Lie group: L_d(w) = h l(xi), xi = tau^-1(w)/h; action groupoid: "
+                   "h/2 [l(q0, xi) + l(q1, xi)]"),
+    Rule("lie_midpoint", 2, "Lie group: L_d(w0, w1) = h L((xi0+xi1)/2, (xi1-xi0)/h) (paper eq. "
+                            "sdfinal); action groupoid: the base point at the middle node"),
+    Rule("product", 1, "product groupoid: each factor's first-order default, tensor product"),
+    Rule("product2", 2, "product groupoid: each factor's second-order default, tensor product"),
+)}
 
 
 def rule_names() -> list[str]:

@@ -16,6 +16,7 @@ from sympy.printing.c import C99CodePrinter
 
 from . import __version__
 from .derive import DerivedModel, Kernel
+from .groupoids.analytic import THETA, AnalyticCoefficient, c_definition
 
 
 class ArrayPrinter(C99CodePrinter):
@@ -29,6 +30,14 @@ class ArrayPrinter(C99CodePrinter):
         return self._names.get(expr) or super()._print_Symbol(expr)
 
     _print_Dummy = _print_Symbol
+
+    def _print_Function(self, expr):
+        if isinstance(expr, AnalyticCoefficient):
+            return f"{type(expr).__name__}({self._print(expr.args[0])})"
+        return super()._print_Function(expr)
+
+    def _print_cot(self, expr):
+        return f"(1.0/tan({self._print(expr.args[0])}))"
 
     def _print_Pow(self, expr):
         base, exp = expr.as_base_exp()
@@ -65,13 +74,37 @@ def environment() -> jinja2.Environment:
                               trim_blocks=True, lstrip_blocks=True)
 
 
+def _levels(definitions) -> list[list[tuple[sp.Symbol, sp.Expr]]]:
+    """Group definitions so that each group uses only symbols of earlier groups."""
+    level: dict[sp.Symbol, int] = {}
+    groups: list[list] = []
+    for symbol, expr in definitions:
+        k = max((level[s] + 1 for s in expr.free_symbols if s in level), default=0)
+        level[symbol] = k
+        while len(groups) <= k:
+            groups.append([])
+        groups[k].append((symbol, expr))
+    return groups
+
+
 def _render_kernel(kernel: Kernel, dm: DerivedModel) -> dict:
     names = {s: f"z[{i}]" for i, s in enumerate(kernel.z)}
     names |= {s: f"p[{i}]" for i, s in enumerate(dm.parameters)}
+    names |= {s: f"d{i}" for i, (s, _) in enumerate(kernel.definitions)}
     names[dm.step] = "h"
     printer = ArrayPrinter(names)
+    temporaries = []
+    # Definitions first, one CSE per dependency level, so that every temporary is
+    # computed after the definitions it uses.
+    for k, group in enumerate(_levels(kernel.definitions)):
+        shared, reduced = sp.cse([e for _, e in group], symbols=sp.numbered_symbols(f"u{k}_"),
+                                 order="none")
+        temporaries += [{"name": str(t), "code": printer.doprint(e)} for t, e in shared]
+        temporaries += [{"name": names[sym], "code": printer.doprint(e)}
+                        for (sym, _), e in zip(group, reduced)]
     flat = [e for _, M in kernel.outputs for e in M]
-    temporaries, reduced = sp.cse(flat, symbols=sp.numbered_symbols("t"), order="none")
+    shared, reduced = sp.cse(flat, symbols=sp.numbered_symbols("t"), order="none")
+    temporaries += [{"name": str(t), "code": printer.doprint(e)} for t, e in shared]
     position = 0
     outputs = []
     for out_name, M in kernel.outputs:
@@ -81,8 +114,7 @@ def _render_kernel(kernel: Kernel, dm: DerivedModel) -> dict:
             position += 1
         outputs.append({"name": out_name, "size": len(M), "assignments": lines})
     return {"name": kernel.name, "doc": kernel.doc, "nz": len(kernel.z),
-            "temporaries": [{"name": str(t), "code": printer.doprint(e)} for t, e in temporaries],
-            "outputs": outputs}
+            "temporaries": temporaries, "outputs": outputs}
 
 
 def emit(dm: DerivedModel) -> CSource:
@@ -93,6 +125,8 @@ def emit(dm: DerivedModel) -> CSource:
         "K": dm.stencil_elements, "order": dm.order, "np": len(dm.parameters),
         "kernels": [_render_kernel(k, dm) for k in dm.kernels],
         "bvp": dm.nodes_are_unknowns,
+        "coefficients": [c_definition(c, ArrayPrinter({THETA: "theta"}))
+                         for c in dm.coefficients],
         **dm.c_context,
     }
     c_source = env.get_template("module.c.j2").render(**context)

@@ -12,17 +12,35 @@ import numpy as np
 import sympy as sp
 
 
+def sequential_lambdify(args: Sequence[sp.Symbol],
+                        definitions: Sequence[tuple[sp.Symbol, sp.Expr]], expr):
+    """NumPy function of ``args`` computing ``expr``, which may use the symbols of
+    ``definitions`` — (symbol, expression) pairs evaluated in order first."""
+    args = list(args)
+    steps = [sp.lambdify(args + [d for d, _ in definitions[:i]], e, "numpy")
+             for i, (_, e) in enumerate(definitions)]
+    final = sp.lambdify(args + [d for d, _ in definitions], expr, "numpy", cse=True)
+
+    def evaluate(*values):
+        known = list(values)
+        for step in steps:
+            known.append(step(*known))
+        return final(*known)
+    return evaluate
+
+
 def generic_rank(matrix: sp.Matrix, symbols: Sequence[sp.Symbol],
                  fixed: dict[sp.Symbol, float] | None = None, samples: int = 4,
-                 seed: int = 20261121) -> int | None:
+                 seed: int = 20261121, definitions=()) -> int | None:
     """Largest numerical rank of ``matrix`` over random points of ``symbols``.
 
-    ``fixed`` gives values for the remaining symbols (parameters, the step). Returns
-    None when no sample point gave finite entries.
+    ``fixed`` gives values for the remaining symbols (parameters, the step);
+    ``definitions`` intermediate quantities ``matrix`` may use (see
+    :func:`sequential_lambdify`). Returns None when no sample point gave finite entries.
     """
     fixed = dict(fixed or {})
     args = list(symbols) + list(fixed)
-    f = sp.lambdify(args, matrix, modules="numpy")
+    f = sequential_lambdify(args, definitions, matrix)
     rng = np.random.default_rng(seed)
     best = None
     for _ in range(samples):

@@ -12,8 +12,12 @@ FIRST_ORDER = ("harmonic_oscillator", "pendulum", "double_pendulum")
 SECOND_ORDER = ("cubic_spline", "spline_potential")
 #: Bundled models on the pair groupoid (node-based oracle, Taylor consistency).
 PAIR = FIRST_ORDER + SECOND_ORDER
-#: Bundled models on matrix Lie groups.
-LIE = tuple(name for name in BUNDLED if name not in PAIR)
+#: Bundled models on matrix Lie groups (over a point).
+LIE = ("rigid_body", "rigid_body_exp", "planar_body", "planar_body_exp")
+#: Bundled models on action groupoids Q×H.
+ACTION = ("heavy_top", "heavy_top_exp", "spherical_pendulum", "spherical_pendulum_exp",
+          "se3_body", "se3_body_exp")
+assert set(PAIR + LIE + ACTION) == set(BUNDLED)
 
 
 @pytest.fixture(scope="session")
@@ -45,4 +49,4 @@ def derived():
     return get_derived
 
 
-__all__ = ["BUNDLED", "FIRST_ORDER", "SECOND_ORDER", "PAIR", "LIE"]
+__all__ = ["BUNDLED", "FIRST_ORDER", "SECOND_ORDER", "PAIR", "LIE", "ACTION"]

@@ -100,19 +100,56 @@ class CompiledModel:
         """Whole-trajectory solve with fixed end nodes; see :func:`bvp.solve_bvp`."""
         return solve_bvp(self, start, end, n_steps, h, params, **options)
 
+    @property
+    def matrix_dims(self) -> tuple[int, ...]:
+        """Sizes d of the matrix-group factors whose configurations are reconstructed."""
+        return tuple(self.info["matrix_dims"])
+
+    def configurations(self, g: np.ndarray):
+        """Split flat configurations (steps × Σd²) into (steps, d, d) arrays, one per group
+        factor; a single factor is returned as its array, none as None."""
+        if not self.matrix_dims:
+            return None
+        blocks, at = [], 0
+        for d in self.matrix_dims:
+            blocks.append(g[:, at:at + d * d].reshape(-1, d, d))
+            at += d * d
+        return blocks[0] if len(blocks) == 1 else tuple(blocks)
+
     def initial_state(self, initial) -> tuple[np.ndarray, np.ndarray]:
-        """Split initial data into the stencil prefix (x_0, f_0, …, f_{K−2}) and g_0."""
-        K, kind = self.stencil_elements, self.info["kind"]
-        if kind == "pair":
+        """Split initial data into the stencil prefix (x_0, f_0, …, f_{K−2}) and g_0.
+
+        Pair groupoid: the first K nodes, shape (K, n). Otherwise ``(x_0, g_0, f)``:
+        the first base point, the configurations of the matrix-group factors (one (d, d)
+        matrix, or a sequence of them; optional, identity by default) and the first K−1
+        fibre parts; a Lie group over a point has no base point: ``(g_0, f)``.
+        """
+        K = self.stencil_elements
+        if self.info["kind"] == "pair":
             nodes = arguments.finite_array(initial, (K, self.n),
                                            f"initial nodes (the first {K} nodes q_0..q_{K - 1})")
             return nodes.reshape(-1), np.zeros(1)
-        first, fibres = initial
+        parts = list(initial) if isinstance(initial, (tuple, list)) else [initial]
+        x0 = [] if self.m == 0 else parts.pop(0) if parts else None
+        fibres = parts.pop() if parts else None
+        if fibres is None or len(parts) > 1:
+            layout = "(g_0, f)" if self.m == 0 else "(x_0, f) or (x_0, g_0, f)"
+            raise ValueError(f"initial data must be {layout}")
         fibres = arguments.finite_array(fibres, (K - 1, self.n),
                                         f"initial increments (the first {K - 1} fibre parts)")
-        if kind == "lie":
-            d = self.info["matrix_dim"]
-            g0 = arguments.finite_array(first, (d, d), "initial configuration g_0")
-            return fibres.reshape(-1), g0.reshape(-1)
-        x0 = arguments.finite_array(first, (self.m,), "initial base point")
-        return np.concatenate([x0, fibres.reshape(-1)]), np.zeros(1)
+        x0 = arguments.finite_array(x0, (self.m,), "initial base point x_0")
+        return np.concatenate([x0, fibres.reshape(-1)]), self._initial_configuration(parts)
+
+    def _initial_configuration(self, parts) -> np.ndarray:
+        dims = self.matrix_dims
+        if not dims:
+            return np.zeros(1)
+        if not parts:
+            return np.concatenate([np.eye(d).reshape(-1) for d in dims])
+        given = parts[0]
+        blocks = [given] if len(dims) == 1 else list(given)
+        if len(blocks) != len(dims):
+            raise ValueError(f"g_0 needs {len(dims)} matrices, one per group factor")
+        return np.concatenate([
+            arguments.finite_array(b, (d, d), "initial configuration g_0").reshape(-1)
+            for b, d in zip(blocks, dims)])

@@ -10,7 +10,8 @@ _FAILURE = {
     Status.MAX_ITERATIONS: "Newton's method did not converge in {maxiter} iterations",
     Status.SINGULAR_JACOBIAN: "the step Jacobian is singular",
     Status.NON_FINITE: "the residual or the update became non-finite (NaN or inf)",
-    Status.OUTSIDE_CHART: "the increment left the retraction's domain (I − hξ/2 singular)",
+    Status.OUTSIDE_CHART: ("the increment hξ left the retraction's chart (Cayley: I − hξ/2 "
+                           "singular; exp: θ(hξ) ≥ π)"),
 }
 
 
@@ -25,6 +26,8 @@ def integrate(model, initial, n_steps: int, h: float, params=None, *, maxiter: i
     initial : the first K−1 elements. Pair groupoid: the first 2r nodes q_0, …, q_{2r−1}
         as an array (2r, n) (r the order). Matrix Lie group: ``(g_0, xi)`` with g_0 the
         initial configuration (d, d) and xi the first 2r−1 increments ξ_k (2r−1, n).
+        Action groupoids and products: ``(x_0, f)`` or ``(x_0, g_0, f)`` (see
+        :meth:`CompiledModel.initial_state`).
     n_steps : number of new elements to compute.
     h : time step (> 0). params : parameter overrides (mapping name → value).
     maxiter, xtol, ftol : Newton stops when ‖Δf‖∞ ≤ xtol·(1 + ‖f‖∞) or ‖R‖∞ ≤ ftol.
@@ -63,9 +66,8 @@ def integrate(model, initial, n_steps: int, h: float, params=None, *, maxiter: i
             return model.along("energy", x, f, h, params)[:, 0]
         return None
 
-    d = model.info["matrix_dim"]
     result = StepResult(t=h * np.arange(x.shape[0]), x=x, f=f,
-                        g=g.reshape(-1, d, d) if G else None,
+                        g=model.configurations(g.reshape(x.shape[0], -1)) if G else None,
                         newton_iterations=iters[:steps].copy(), status=status, message=message,
                         along=along)
     return result.raise_for_status() if raise_on_failure else result

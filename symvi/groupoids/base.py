@@ -4,7 +4,8 @@ An element g of a Lie groupoid G ⇉ Q is described in coordinates by its source
 x = α(g) ∈ Q (``source_dim`` numbers) and its α-fibre part f (``fibre_dim`` numbers, the
 rank of the algebroid AG). A groupoid supplies only
 
-* ``target(x, f)``: the coordinates of β(g);
+* ``target(x, f, h)``: the coordinates of β(g) (h for groupoids whose fibre coordinates
+  are scaled by the time step);
 * ``right(x, f, h)``: the matrix whose column a is d/dε of the coordinates (x, f) of
   g·σ_a(ε) at ε = 0 — the left-invariant field of the basis section e_a (paper §2.1);
   h is the time step, for groupoids whose fibre coordinates are scaled by it;
@@ -37,8 +38,6 @@ class Groupoid(ABC):
 
     #: Short name of the groupoid kind, stored in generated modules' metadata.
     kind: str = "abstract"
-    #: True when fibre coordinates are an increment divided by h (ξ = τ⁻¹(w)/h).
-    fibre_scales_with_step: bool = False
 
     @property
     @abstractmethod
@@ -51,7 +50,8 @@ class Groupoid(ABC):
         """Rank n of the algebroid: number of fibre coordinates f of an element."""
 
     @abstractmethod
-    def target(self, x: Sequence[sp.Expr], f: Sequence[sp.Expr]) -> tuple[sp.Expr, ...]:
+    def target(self, x: Sequence[sp.Expr], f: Sequence[sp.Expr],
+               h: sp.Expr) -> tuple[sp.Expr, ...]:
         """Coordinates of β(g) for g = (x, f)."""
 
     @abstractmethod
@@ -71,8 +71,26 @@ class Groupoid(ABC):
         """The highest derivatives of an order-``order`` Lagrangian (Legendre condition)."""
 
     @abstractmethod
+    def rules(self, order: int) -> tuple[str, ...]:
+        """Names of the discretisations (:data:`symvi.discretise.RULES`) this groupoid
+        supports at ``order``; the first is the default."""
+
+    @abstractmethod
+    def quadrature(self, rule: str, xs, fs, h: sp.Expr) -> list[tuple[sp.Expr, dict]]:
+        """Weighted points of ``rule`` on a window of slots: L_d = h Σ w·L(point), each
+        point a substitution of :meth:`continuous_symbols` (DESIGN.md §3)."""
+
     def default_discretisation(self, order: int) -> str:
         """Name of the rule used when a model names none."""
+        return self.rules(order)[0]
+
+    def step_scaled(self) -> tuple[bool, ...]:
+        """Per fibre coordinate: True when it is an increment divided by h (ξ = τ⁻¹(w)/h).
+
+        Holding a groupoid element fixed while h varies (the discrete energy) then holds
+        h·ξ fixed.
+        """
+        return (False,) * self.fibre_dim
 
     @abstractmethod
     def discrete_symbols(self, order: int) -> tuple[sp.Symbol, ...]:
@@ -103,8 +121,17 @@ class Groupoid(ABC):
         _shape(fibres, (2 * order - 1, self.fibre_dim), "initial fibre parts")
 
     def c_context(self) -> dict:
-        """Numbers the C templates need beyond the kernels (e.g. a Lie algebra basis)."""
-        return {"configuration_dim": 0}
+        """Numbers the C templates need beyond the kernels.
+
+        ``configuration_dim``: numbers of the configuration reconstructed along a path
+        (Σ d² over matrix-group factors); ``groups``: one dict per matrix-group factor
+        (see :meth:`MatrixLieGroup.group_context`).
+        """
+        return {"configuration_dim": 0, "groups": []}
+
+    def coefficient_functions(self) -> list:
+        """Analytic coefficient functions the C reconstruction uses (exponential maps)."""
+        return []
 
     @property
     def nodes_are_unknowns(self) -> bool:

@@ -10,17 +10,22 @@ so the first-order residual is the discrete Euler–Poincaré equation
 (dτ⁻¹_{−hξ_k})*μ_k − (dτ⁻¹_{hξ_{k+1}})*μ_{k+1} = 0, μ = ∂l/∂ξ (end of paper §2, with the
 signs of ERRATA.md item 7).
 
-Retraction: the Cayley map cay(X) = (I − X/2)⁻¹(I + X/2) of any quadratic matrix group,
-whose inverse derivative dcay⁻¹_X(Y) = (I − X/2) Y (I + X/2) is polynomial; results are
-projected onto the basis with its dual basis.
+Retraction (chosen per group object, :mod:`symvi.groupoids.retraction`): the Cayley map of
+any quadratic matrix group (dcay⁻¹ polynomial), or the exponential map where X and ad_X have
+a closed-form minimal polynomial (SO(3), SE(2), SE(3)). Results are projected onto the basis
+with its dual basis.
 """
 from __future__ import annotations
 
+from functools import cached_property
 from typing import Sequence
 
+import numpy as np
 import sympy as sp
 
 from ..errors import ModelError
+from . import analytic
+from . import retraction as _retraction
 from .base import Groupoid, _shape
 
 
@@ -36,7 +41,7 @@ def _symbol_names(names, n: int, default: str) -> tuple[str, ...]:
 
 
 class MatrixLieGroup(Groupoid):
-    """A matrix Lie group with the Cayley retraction, as a groupoid over a point.
+    """A matrix Lie group with a retraction, as a groupoid over a point.
 
     Parameters
     ----------
@@ -48,12 +53,14 @@ class MatrixLieGroup(Groupoid):
         use ``xidot``).
     label:
         Name of the group for messages and fingerprints.
+    retraction:
+        ``"cayley"`` (any quadratic group) or ``"exp"`` (closed forms where available).
     """
 
     kind = "lie"
-    fibre_scales_with_step = True
 
-    def __init__(self, basis: Sequence, names=None, label: str = "G"):
+    def __init__(self, basis: Sequence, names=None, label: str = "G",
+                 retraction: str = "cayley"):
         self.label = label
         self.basis = tuple(sp.Matrix(E) for E in basis)
         if not self.basis:
@@ -70,9 +77,10 @@ class MatrixLieGroup(Groupoid):
         self.names = _symbol_names(names, len(self.basis), "xi")
         self.xi = tuple(sp.Symbol(n, real=True) for n in self.names)
         self.xidot = tuple(sp.Symbol(f"{n}_dot", real=True) for n in self.names)
+        self.retraction = _retraction.make(retraction, self)
 
     def __repr__(self) -> str:
-        return f"MatrixLieGroup({self.label}, dim {len(self.basis)})"
+        return f"MatrixLieGroup({self.label}, dim {len(self.basis)}, {self.retraction.name})"
 
     # -- algebra --------------------------------------------------------------------------
     def coordinates(self, M: sp.Matrix) -> sp.Matrix:
@@ -96,11 +104,40 @@ class MatrixLieGroup(Groupoid):
                 constants[(a, b)] = tuple(c)
         return constants
 
+    def ad(self, x) -> sp.Matrix:
+        """Matrix of ad_X = [X, ·], X = Σ x_a E_a, in the basis."""
+        X = self.hat(x)
+        return sp.Matrix.hstack(*[self.coordinates(X * E - E * X) for E in self.basis])
+
+    def minimal_structure(self) -> dict | None:
+        """The closed-form structure of X and ad_X, or None (see :mod:`.analytic`).
+
+        ``matrix``, ``adjoint``: (a, b) with M^a (M² + θ²)^b = 0; ``theta_squared(x)``: θ²
+        as a function of the coordinates; ``quadratic_form``: its matrix (θ² = xᵀQx).
+        """
+        return self._structure
+
+    @cached_property
+    def _structure(self) -> dict | None:
+        x = sp.symbols(f"x0:{self.fibre_dim}", real=True)
+        matrix = analytic.minimal_structure(self.hat(x))
+        adjoint = analytic.minimal_structure(self.ad(x))
+        if matrix is None or adjoint is None or sp.expand(matrix[2] - adjoint[2]) != 0:
+            return None
+        s = matrix[2]
+        Q = sp.hessian(s, x) / 2
+        if np.linalg.eigvalsh(np.array(Q, dtype=float)).min() < -1e-14:
+            return None
+        return {"matrix": matrix[:2], "adjoint": adjoint[:2], "quadratic_form": Q,
+                "theta_squared": lambda v: s.xreplace(dict(zip(x, v)))}
+
     def dtau_inv(self, x) -> sp.Matrix:
-        """Matrix of dcay⁻¹_X (right-trivialised), X = Σ x_a E_a, in the basis."""
-        X, eye = self.hat(x), sp.eye(self.matrix_dim)
-        return sp.Matrix.hstack(*[self.coordinates((eye - X / 2) * E * (eye + X / 2))
-                                  for E in self.basis]).applyfunc(sp.expand)
+        """Matrix of the retraction's right-trivialised dτ⁻¹_X, X = Σ x_a E_a."""
+        return self.retraction.inverse_derivative(x)
+
+    def tau(self, x) -> sp.Matrix:
+        """τ(X) as a matrix."""
+        return self.retraction.matrix(x)
 
     # -- groupoid interface ---------------------------------------------------------------
     @property
@@ -111,7 +148,7 @@ class MatrixLieGroup(Groupoid):
     def fibre_dim(self) -> int:
         return len(self.basis)
 
-    def target(self, x, f):
+    def target(self, x, f, h):
         return ()
 
     def right(self, x, f, h):
@@ -129,8 +166,21 @@ class MatrixLieGroup(Groupoid):
     def leading_symbols(self, order):
         return self.xidot if order == 2 else self.xi
 
-    def default_discretisation(self, order):
-        return "lie_midpoint" if order == 2 else "lie"
+    def rules(self, order):
+        return ("lie_midpoint",) if order == 2 else ("lie",)
+
+    def step_scaled(self):
+        return (True,) * self.fibre_dim
+
+    def algebra_point(self, fs, h) -> dict:
+        """ξ (and ξ̇ for two slots) of the rules ``lie`` and ``lie_midpoint``."""
+        if len(fs) == 1:
+            return dict(zip(self.xi, fs[0]))
+        x0, x1 = sp.Matrix(fs[0]), sp.Matrix(fs[1])
+        return dict(zip(self.xi, (x0 + x1) / 2)) | dict(zip(self.xidot, (x1 - x0) / h))
+
+    def quadrature(self, rule, xs, fs, h):
+        return [(1, self.algebra_point(fs, h))]
 
     def discrete_symbols(self, order):
         return tuple(sp.Symbol(f"{n}_{k}", real=True) for k in range(order) for n in self.names)
@@ -145,31 +195,40 @@ class MatrixLieGroup(Groupoid):
         _shape(fibres, (2 * order - 1, self.fibre_dim), "initial increments ξ")
 
     def fingerprint(self) -> str:
-        return f"lie:{self.label}:cayley:{[E.tolist() for E in self.basis]}:{self.names}"
+        return (f"lie:{self.label}:{self.retraction.name}:{[E.tolist() for E in self.basis]}:"
+                f"{self.names}")
+
+    def group_context(self, offset: int = 0) -> dict:
+        """One matrix-group factor for ``templates/group.c.j2``; ξ starts at f[offset]."""
+        return {"matrix_dim": self.matrix_dim, "dim": self.fibre_dim, "offset": offset,
+                "basis": [[float(v) for v in E] for E in self.basis],
+                **self.retraction.c_context()}
+
+    def coefficient_functions(self) -> list:
+        return self.retraction.coefficient_functions()
 
     def c_context(self) -> dict:
-        return {"configuration_dim": self.matrix_dim ** 2, "matrix_dim": self.matrix_dim,
-                "basis": [[float(v) for v in E] for E in self.basis]}
+        return {"configuration_dim": self.matrix_dim ** 2, "groups": [self.group_context()]}
 
 
 def _hat3(v):
     return sp.Matrix([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
 
 
-def SO3(names="Omega1 Omega2 Omega3") -> MatrixLieGroup:
+def SO3(names="Omega1 Omega2 Omega3", retraction: str = "cayley") -> MatrixLieGroup:
     """SO(3) with the hat basis of so(3) ≅ R³ (ξ = body angular velocity Ω)."""
-    return MatrixLieGroup([_hat3(sp.eye(3)[:, i]) for i in range(3)], names, "SO3")
+    return MatrixLieGroup([_hat3(sp.eye(3)[:, i]) for i in range(3)], names, "SO3", retraction)
 
 
-def SE2(names="omega v1 v2") -> MatrixLieGroup:
+def SE2(names="omega v1 v2", retraction: str = "cayley") -> MatrixLieGroup:
     """SE(2) as 3×3 homogeneous matrices: rotation rate ω and body velocity (v1, v2)."""
     E = [sp.Matrix([[0, -1, 0], [1, 0, 0], [0, 0, 0]]),
          sp.Matrix([[0, 0, 1], [0, 0, 0], [0, 0, 0]]),
          sp.Matrix([[0, 0, 0], [0, 0, 1], [0, 0, 0]])]
-    return MatrixLieGroup(E, names, "SE2")
+    return MatrixLieGroup(E, names, "SE2", retraction)
 
 
-def SE3(names="Omega1 Omega2 Omega3 V1 V2 V3") -> MatrixLieGroup:
+def SE3(names="Omega1 Omega2 Omega3 V1 V2 V3", retraction: str = "cayley") -> MatrixLieGroup:
     """SE(3) as 4×4 homogeneous matrices: body angular velocity Ω and linear velocity V."""
     def twist(w, v):
         M = sp.zeros(4)
@@ -177,4 +236,4 @@ def SE3(names="Omega1 Omega2 Omega3 V1 V2 V3") -> MatrixLieGroup:
         return M
     e = [list(sp.eye(3)[:, i]) for i in range(3)]
     return MatrixLieGroup([twist(ei, [0, 0, 0]) for ei in e] + [twist([0, 0, 0], ei) for ei in e],
-                          names, "SE3")
+                          names, "SE3", retraction)

@@ -78,8 +78,24 @@ class PairGroupoid(Groupoid):
     def leading_symbols(self, order):
         return self.qddot if order == 2 else self.qdot
 
-    def default_discretisation(self, order):
-        return "three_point" if order == 2 else "midpoint"
+    def rules(self, order):
+        return ("three_point",) if order == 2 else ("midpoint", "trapezoid")
+
+    def _point(self, q, v, a=None) -> dict:
+        point = dict(zip(self.q, q)) | dict(zip(self.qdot, v))
+        return point | dict(zip(self.qddot, a)) if a is not None else point
+
+    def quadrature(self, rule, xs, fs, h):
+        nodes = [sp.Matrix(n) for n in self.window_nodes(xs, fs)]
+        if rule == "three_point":
+            q0, q1, q2 = nodes
+            return [(1, self._point((q0 + q1 + q2) / 3, (q2 - q0) / (2 * h),
+                                    (q2 - 2 * q1 + q0) / h**2))]
+        q0, q1 = nodes
+        v = (q1 - q0) / h
+        if rule == "trapezoid":
+            return [(sp.S.Half, self._point(q0, v)), (sp.S.Half, self._point(q1, v))]
+        return [(1, self._point((q0 + q1) / 2, v))]
 
     def discrete_symbols(self, order):
         return tuple(s for node in self.nodes(order + 1) for s in node)
@@ -92,7 +108,7 @@ class PairGroupoid(Groupoid):
     def check_initial(self, initial, order):
         _shape(initial, (2 * order, self.fibre_dim), f"the first {2 * order} nodes (2·order)")
 
-    def target(self, x, f):
+    def target(self, x, f, h):
         return tuple(f)
 
     def right(self, x, f, h):

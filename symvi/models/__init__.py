@@ -1,6 +1,7 @@
 """Bundled models, usable by name on the command line (``symvi compile pendulum``) and in tests.
 
-Each module of this package defines ``model``, a :class:`symvi.Model`.
+Each module of this package defines ``model``, a :class:`symvi.Model`; models on matrix
+groups also define ``build(retraction)``, and ``<name>_exp`` is ``build("exp")``.
 """
 from __future__ import annotations
 
@@ -11,14 +12,18 @@ from pathlib import Path
 from ..errors import ModelError
 from ..model import Model
 
+_GROUP_MODELS = ("rigid_body", "heavy_top", "spherical_pendulum", "planar_body", "se3_body")
 BUNDLED = ("harmonic_oscillator", "pendulum", "double_pendulum", "cubic_spline",
-           "spline_potential", "rigid_body")
+           "spline_potential") + tuple(f"{name}{suffix}" for name in _GROUP_MODELS
+                                       for suffix in ("", "_exp"))
 
 
 def get(name: str) -> Model:
     """The bundled model called ``name``."""
     if name not in BUNDLED:
         raise ModelError(f"no bundled model {name!r}; bundled models: {', '.join(BUNDLED)}")
+    if name.endswith("_exp"):
+        return importlib.import_module(f"{__name__}.{name[:-4]}").build("exp")
     return importlib.import_module(f"{__name__}.{name}").model
 
 

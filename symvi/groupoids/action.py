@@ -1,0 +1,196 @@
+"""Action Lie groupoids Q×H ⇉ Q of a right action of a matrix Lie group (paper §2.1).
+
+An element (q, w) goes from q to q·w = φ(q, w); (q, w)(q·w, w') = (q, ww'). In
+coordinates (DESIGN.md §2) its source is q ∈ Rᵐ and its fibre part ξ = τ⁻¹(w)/h, so
+
+* β(q, ξ) = φ(q, τ(hξ)) — the reconstruction q_{k+1} = φ(q_k, w_k) of DESIGN.md §3;
+* right(g, a): q is unchanged, ξ moves as on the group;
+* left(g, a): ξ moves as on the group and q by the infinitesimal action
+  d/dε φ(q, τ(εE_a)) at ε = 0 (σ_a(ε)⁻¹·g starts at q·τ(εE_a)).
+
+The heavy top is the standard example: Q = S² ∋ Γ (the direction of gravity in the body
+frame), H = SO(3), Γ·R = RᵀΓ (paper §3.1, action-groupoid example).
+"""
+from __future__ import annotations
+
+from typing import Callable, Sequence
+
+import numpy as np
+import sympy as sp
+
+from ..errors import ModelError
+from .base import Groupoid, _shape
+from .lie import MatrixLieGroup, _symbol_names
+
+Action = Callable[[sp.Matrix, sp.Matrix], Sequence[sp.Expr]]
+
+
+class ActionGroupoid(Groupoid):
+    """Q×H for a right action φ : Q×H → Q of a :class:`MatrixLieGroup` H.
+
+    Parameters
+    ----------
+    group:
+        The acting group H, with its retraction.
+    base:
+        Names of the coordinates q of Q ⊂ Rᵐ (list or space-separated string).
+    action:
+        ``action(q, W)`` → φ(q, W), m expressions, for q an m×1 matrix and W a d×d matrix
+        of H. Checked at construction: φ(q, I) = q exactly, and φ(φ(q, A), B) = φ(q, AB)
+        at random points and group elements (a right action).
+    label:
+        Name for messages and fingerprints.
+    """
+
+    kind = "action"
+
+    def __init__(self, group: MatrixLieGroup, base: str | Sequence[str], action: Action,
+                 label: str | None = None):
+        if not isinstance(group, MatrixLieGroup):
+            raise ModelError(f"the acting group must be a MatrixLieGroup, got {group!r}")
+        self.group = group
+        names = base.replace(",", " ").split() if isinstance(base, str) else list(base)
+        if not names:
+            raise ModelError("an action groupoid needs at least one base coordinate")
+        self.names = _symbol_names(names, len(names), "q")
+        clash = set(self.names) & set(group.names)
+        if clash:
+            raise ModelError(f"base coordinate names {sorted(clash)} clash with the group's")
+        self.label = label or f"Q×{group.label}"
+        self.q = tuple(sp.Symbol(n, real=True) for n in self.names)
+        self._action = action
+        self._W = sp.Matrix(group.matrix_dim, group.matrix_dim,
+                            lambda i, j: sp.Symbol(f"W{i}{j}", real=True))
+        self._phi = self._evaluate_action(sp.Matrix(self.q), self._W)
+        self._check_identity()
+        self._check_right_action()
+        e = sp.Dummy("epsilon")
+        self._generators = sp.Matrix.hstack(*[
+            sp.diff(self._phi.xreplace(dict(zip(self._W, sp.eye(group.matrix_dim) + e * E))), e)
+            .xreplace({e: 0}) for E in group.basis]).applyfunc(sp.expand)
+
+    def __repr__(self) -> str:
+        return f"ActionGroupoid({self.label}: {list(self.names)} × {self.group!r})"
+
+    # -- the action ---------------------------------------------------------------------
+    def _evaluate_action(self, q: sp.Matrix, W: sp.Matrix) -> sp.Matrix:
+        try:
+            value = sp.Matrix(self._action(q, W))
+        except Exception as exc:
+            raise ModelError(f"{self.label}: the action failed on symbolic input: {exc}") from None
+        value = value.reshape(len(value), 1)
+        if value.shape[0] != len(self.names):
+            raise ModelError(f"{self.label}: the action returns {value.shape[0]} coordinates, "
+                             f"expected {len(self.names)} (one per base coordinate)")
+        return value
+
+    def act(self, q: Sequence[sp.Expr], W: sp.Matrix) -> sp.Matrix:
+        """φ(q, W) for expressions q and a matrix W."""
+        return self._phi.xreplace(dict(zip(self.q, q)) | dict(zip(self._W, W)))
+
+    def _check_identity(self) -> None:
+        moved = (self.act(self.q, sp.eye(self.group.matrix_dim)) - sp.Matrix(self.q))
+        if moved.applyfunc(sp.simplify) != sp.zeros(len(self.q), 1):
+            raise ModelError(f"{self.label}: the declared map is not an action: "
+                             f"φ(q, I) = {list(self.act(self.q, sp.eye(self.group.matrix_dim)))} "
+                             f"≠ q")
+
+    def _check_right_action(self, samples: int = 3) -> None:
+        from scipy.linalg import expm
+        phi = sp.lambdify([self.q, list(self._W)], list(self._phi), "numpy")
+        rng = np.random.default_rng(11)
+        basis = [np.array(E, dtype=float) for E in self.group.basis]
+        for _ in range(samples):
+            q = rng.uniform(-1, 1, len(self.q))
+            A, B = (expm(sum(c * E for c, E in zip(rng.uniform(-1, 1, len(basis)), basis)))
+                    for _ in range(2))
+            lhs = np.array(phi(phi(q, A.ravel()), B.ravel()), dtype=float)
+            rhs = np.array(phi(q, (A @ B).ravel()), dtype=float)
+            if not np.allclose(lhs, rhs, rtol=1e-9, atol=1e-12):
+                left = np.allclose(lhs, np.array(phi(q, (B @ A).ravel()), dtype=float),
+                                   rtol=1e-9, atol=1e-12)
+                hint = (" (it is a left action: use φ(q, W⁻¹) to make it a right action)"
+                        if left else "")
+                raise ModelError(
+                    f"{self.label}: the declared map is not a right action: φ(φ(q, A), B) = "
+                    f"{np.round(lhs, 6).tolist()} but φ(q, AB) = {np.round(rhs, 6).tolist()} at "
+                    f"q = {np.round(q, 6).tolist()}{hint}")
+
+    # -- groupoid interface -------------------------------------------------------------
+    @property
+    def source_dim(self) -> int:
+        return len(self.q)
+
+    @property
+    def fibre_dim(self) -> int:
+        return self.group.fibre_dim
+
+    @property
+    def xi(self):
+        return self.group.xi
+
+    @property
+    def xidot(self):
+        return self.group.xidot
+
+    def target(self, x, f, h):
+        return tuple(self.act(x, self.group.tau([h * v for v in f])))
+
+    def right(self, x, f, h):
+        return sp.Matrix.vstack(sp.zeros(self.source_dim, self.fibre_dim),
+                                self.group.right((), f, h))
+
+    def left(self, x, f, h):
+        return sp.Matrix.vstack(self._generators.xreplace(dict(zip(self.q, x))),
+                                self.group.left((), f, h))
+
+    def predictor(self, xs, fs):
+        return self.group.predictor(xs, fs)
+
+    def continuous_symbols(self, order):
+        return self.q + self.group.continuous_symbols(order)
+
+    def leading_symbols(self, order):
+        return self.group.leading_symbols(order)
+
+    def rules(self, order):
+        return self.group.rules(order)
+
+    def step_scaled(self):
+        return self.group.step_scaled()
+
+    def quadrature(self, rule, xs, fs, h):
+        """``lie``: trapezoid in the base, h/2 [l(q_0, ξ) + l(q_1, ξ)] (symmetric, order 2);
+        ``lie_midpoint``: the base point at the middle node of the two elements."""
+        algebra = self.group.algebra_point(fs, h)
+        if rule == "lie_midpoint":
+            return [(1, dict(zip(self.q, xs[1])) | algebra)]
+        q1 = self.target(xs[0], fs[0], h)
+        return [(sp.S.Half, dict(zip(self.q, xs[0])) | algebra),
+                (sp.S.Half, dict(zip(self.q, q1)) | algebra)]
+
+    def discrete_symbols(self, order):
+        return self.q + self.group.discrete_symbols(order)
+
+    def discrete_mapping(self, order, xs, fs):
+        return dict(zip(self.q, xs[0])) | self.group.discrete_mapping(order, xs, fs)
+
+    def check_initial(self, initial, order):
+        parts = list(initial)
+        if len(parts) not in (2, 3):
+            raise ModelError("initial data must be (q_0, xi) or (q_0, g_0, xi)")
+        _shape(parts[0], (self.source_dim,), "initial base point q_0")
+        if len(parts) == 3:
+            d = self.group.matrix_dim
+            _shape(parts[1], (d, d), "initial configuration g_0")
+        _shape(parts[-1], (2 * order - 1, self.fibre_dim), "initial increments ξ")
+
+    def fingerprint(self) -> str:
+        return f"action:{self.label}:{self.names}:{sp.srepr(self._phi)}:{self.group.fingerprint()}"
+
+    def c_context(self) -> dict:
+        return {"configuration_dim": self.group.matrix_dim ** 2,
+                "groups": [self.group.group_context(0)]}
+
+    def coefficient_functions(self) -> list:
+        return self.group.coefficient_functions()

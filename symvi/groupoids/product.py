@@ -1,0 +1,140 @@
+"""Products G₁×…×G_k of Lie groupoids (DESIGN.md §2: "concatenation, blockwise").
+
+An element is a tuple of elements; its source and fibre coordinates are the factors'
+concatenated, and the node variations act blockwise (a basis section of the product
+algebroid is a basis section of one factor). The heavy top with rotors of paper §3.3 lives
+on the action groupoid of SO(3) times the pair groupoid of the rotor angles.
+"""
+from __future__ import annotations
+
+import itertools
+import sympy as sp
+
+from ..errors import ModelError
+from .base import Groupoid, _shape
+
+
+class ProductGroupoid(Groupoid):
+    """The product of groupoids; the discretisation is each factor's default, combined."""
+
+    kind = "product"
+
+    def __init__(self, *factors: Groupoid):
+        if len(factors) < 2 or not all(isinstance(f, Groupoid) for f in factors):
+            raise ModelError("ProductGroupoid needs two or more symvi groupoids")
+        self.factors = tuple(factors)
+        symbols = [s for f in factors for s in f.continuous_symbols(2)]
+        repeated = sorted({str(s) for s in symbols if symbols.count(s) > 1})
+        if repeated:
+            raise ModelError(f"the factors of a product share coordinate names {repeated}; "
+                             f"rename them")
+        self._m = [f.source_dim for f in factors]
+        self._n = [f.fibre_dim for f in factors]
+
+    def __repr__(self) -> str:
+        return " × ".join(map(repr, self.factors))
+
+    def _split(self, values, sizes) -> list[tuple]:
+        values, out = tuple(values), []
+        for offset, size in zip(itertools.accumulate([0] + sizes), sizes):
+            out.append(values[offset:offset + size])
+        return out
+
+    def _factor_slots(self, xs, fs):
+        """Per factor: its sources and fibres of every slot."""
+        xs = [self._split(x, self._m) for x in xs]
+        fs = [self._split(f, self._n) for f in fs]
+        return [([x[i] for x in xs], [f[i] for f in fs]) for i in range(len(self.factors))]
+
+    def _blocks(self, side: str, x, f, h) -> sp.Matrix:
+        M, N = sum(self._m), sum(self._n)
+        out = sp.zeros(M + N, N)
+        mo = no = 0
+        for factor, xi, fi in zip(self.factors, self._split(x, self._m), self._split(f, self._n)):
+            block = getattr(factor, side)(xi, fi, h)
+            m, n = factor.source_dim, factor.fibre_dim
+            out[mo:mo + m, no:no + n] = block[:m, :]
+            out[M + no:M + no + n, no:no + n] = block[m:, :]
+            mo, no = mo + m, no + n
+        return out
+
+    # -- groupoid interface -------------------------------------------------------------
+    @property
+    def source_dim(self) -> int:
+        return sum(self._m)
+
+    @property
+    def fibre_dim(self) -> int:
+        return sum(self._n)
+
+    def target(self, x, f, h):
+        return tuple(v for factor, xi, fi in zip(self.factors, self._split(x, self._m),
+                                                 self._split(f, self._n))
+                     for v in factor.target(xi, fi, h))
+
+    def right(self, x, f, h):
+        return self._blocks("right", x, f, h)
+
+    def left(self, x, f, h):
+        return self._blocks("left", x, f, h)
+
+    def predictor(self, xs, fs):
+        return tuple(v for factor, (fx, ff) in zip(self.factors, self._factor_slots(xs, fs))
+                     for v in factor.predictor(fx, ff))
+
+    def continuous_symbols(self, order):
+        return tuple(s for f in self.factors for s in f.continuous_symbols(order))
+
+    def leading_symbols(self, order):
+        return tuple(s for f in self.factors for s in f.leading_symbols(order))
+
+    def rules(self, order):
+        return ("product2",) if order == 2 else ("product",)
+
+    def step_scaled(self):
+        return tuple(s for f in self.factors for s in f.step_scaled())
+
+    def quadrature(self, rule, xs, fs, h):
+        """Tensor product of the factors' default quadratures of the rule's order."""
+        order = 2 if rule == "product2" else 1
+        per_factor = [factor.quadrature(factor.default_discretisation(order), fx, ff, h)
+                      for factor, (fx, ff) in zip(self.factors, self._factor_slots(xs, fs))]
+        points = []
+        for combination in itertools.product(*per_factor):
+            weight = sp.Mul(*[w for w, _ in combination])
+            point = {}
+            for _, p in combination:
+                point |= p
+            points.append((weight, point))
+        return points
+
+    def discrete_symbols(self, order):
+        return tuple(s for f in self.factors for s in f.discrete_symbols(order))
+
+    def discrete_mapping(self, order, xs, fs):
+        mapping = {}
+        for factor, (fx, ff) in zip(self.factors, self._factor_slots(xs, fs)):
+            mapping |= factor.discrete_mapping(order, fx, ff)
+        return mapping
+
+    def check_initial(self, initial, order):
+        parts = list(initial)
+        if len(parts) not in (2, 3):
+            raise ModelError("initial data must be (x_0, f) or (x_0, g_0, f)")
+        _shape(parts[0], (self.source_dim,), "initial base point x_0")
+        _shape(parts[-1], (2 * order - 1, self.fibre_dim), "initial fibre parts")
+
+    def fingerprint(self) -> str:
+        return "product:" + "|".join(f.fingerprint() for f in self.factors)
+
+    def c_context(self) -> dict:
+        groups, offset, size = [], 0, 0
+        for factor in self.factors:
+            for G in factor.c_context()["groups"]:
+                groups.append(G | {"offset": G["offset"] + offset})
+                size += G["matrix_dim"] ** 2
+            offset += factor.fibre_dim
+        return {"configuration_dim": size, "groups": groups}
+
+    def coefficient_functions(self) -> list:
+        return [c for f in self.factors for c in f.coefficient_functions()]
