@@ -125,6 +125,7 @@ def emit(dm: DerivedModel) -> CSource:
         "K": dm.stencil_elements, "order": dm.order, "np": len(dm.parameters),
         "kernels": [_render_kernel(k, dm) for k in dm.kernels],
         "bvp": dm.nodes_are_unknowns,
+        "group_bvp": dm.kind == "lie",
         "coefficients": [c_definition(c, ArrayPrinter({THETA: "theta"}))
                          for c in dm.coefficients],
         **dm.c_context,

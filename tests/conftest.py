@@ -13,7 +13,7 @@ SECOND_ORDER = ("cubic_spline", "spline_potential")
 #: Bundled models on the pair groupoid (node-based oracle, Taylor consistency).
 PAIR = FIRST_ORDER + SECOND_ORDER
 #: Bundled models on matrix Lie groups (over a point).
-LIE = ("rigid_body", "rigid_body_exp", "planar_body", "planar_body_exp")
+LIE = ("rigid_body", "rigid_body_exp", "planar_body", "planar_body_exp", "so3_cubic")
 #: Bundled models on action groupoids Q×H.
 ACTION = ("heavy_top", "heavy_top_exp", "spherical_pendulum", "spherical_pendulum_exp",
           "se3_body", "se3_body_exp")

@@ -6,7 +6,7 @@ from typing import Mapping
 import numpy as np
 
 from . import arguments
-from .bvp import solve_bvp
+from .bvp import increments, solve_bvp
 from .stepping import integrate
 
 
@@ -115,6 +115,11 @@ class CompiledModel:
             blocks.append(g[:, at:at + d * d].reshape(-1, d, d))
             at += d * d
         return blocks[0] if len(blocks) == 1 else tuple(blocks)
+
+    def increments(self, g, h: float, params=None) -> np.ndarray:
+        """ξ_k = τ⁻¹(g_k⁻¹g_{k+1})/h of configurations g (K, d, d) on a matrix Lie group;
+        see :func:`bvp.increments`."""
+        return increments(self, g, h, params)
 
     def initial_state(self, initial) -> tuple[np.ndarray, np.ndarray]:
         """Split initial data into the stencil prefix (x_0, f_0, …, f_{K−2}) and g_0.

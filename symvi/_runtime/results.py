@@ -86,7 +86,10 @@ class BVPResult(_Checkable):
 
     Attributes
     ----------
-    t, q : (N+1,) times and (N+1, n) nodes, boundary nodes included.
+    t : (N+1,) times of the nodes.
+    q : (N+1, n) nodes, boundary nodes included (pair groupoid), else None.
+    g : (N+1, d, d) configurations, boundary ones included (matrix Lie group), else None.
+    f : (N, n) increments ξ_k = τ⁻¹(g_k⁻¹g_{k+1})/h (matrix Lie group), else None.
     iterations : Newton iterations taken.
     residual_norms : max-norm of the residual before each iteration and at the end.
     step_norms : max-norm of each Newton update actually taken (after line search).
@@ -94,12 +97,14 @@ class BVPResult(_Checkable):
     """
 
     t: np.ndarray
-    q: np.ndarray
     iterations: int
     residual_norms: np.ndarray
     step_norms: np.ndarray
     status: Status
     message: str
+    q: np.ndarray | None = None
+    g: np.ndarray | None = None
+    f: np.ndarray | None = None
 
     @property
     def success(self) -> bool:

@@ -202,6 +202,7 @@ class MatrixLieGroup(Groupoid):
         """One matrix-group factor for ``templates/group.c.j2``; ξ starts at f[offset]."""
         return {"matrix_dim": self.matrix_dim, "dim": self.fibre_dim, "offset": offset,
                 "basis": [[float(v) for v in E] for E in self.basis],
+                "dual": [[float(v) for v in row] for row in self._dual.tolist()],
                 **self.retraction.c_context()}
 
     def coefficient_functions(self) -> list:

@@ -14,7 +14,7 @@ from ..model import Model
 
 _GROUP_MODELS = ("rigid_body", "heavy_top", "spherical_pendulum", "planar_body", "se3_body")
 BUNDLED = ("harmonic_oscillator", "pendulum", "double_pendulum", "cubic_spline",
-           "spline_potential") + tuple(f"{name}{suffix}" for name in _GROUP_MODELS
+           "spline_potential", "so3_cubic") + tuple(f"{name}{suffix}" for name in _GROUP_MODELS
                                        for suffix in ("", "_exp"))
 
 
