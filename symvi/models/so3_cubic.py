@@ -14,8 +14,8 @@ G = SO3()
 model = Model(
     name="so3_cubic", groupoid=G,
     lagrangian=sum(v**2 for v in G.xidot) / 2,
-    example=Example(initial=(sp.eye(3).tolist(), [[0.3, 1.0, 0.2], [0.3, 1.0, 0.25],
-                                                 [0.31, 1.0, 0.3]]), h=0.01, n_steps=1000),
+    example=Example(initial=(sp.eye(3).tolist(), [[0.3, 1.0, 0.2], [0.3, 1.001, 0.202],
+                                                 [0.3, 1.002, 0.204]]), h=0.01, n_steps=1000),
     description="Riemannian cubics in the Lie algebra on SO(3), second-order Euler-Poincare, "
                 "Cayley retraction.",
 )
