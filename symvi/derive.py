@@ -75,7 +75,7 @@ class DerivedModel:
     defaults: tuple[float, ...]
     step: sp.Symbol
     kernels: tuple[Kernel, ...]
-    nodes_are_unknowns: bool
+    whole_trajectory: str | None
     has_energy: bool
     fingerprint: str
     c_context: dict
@@ -201,15 +201,11 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
     p_plus = _stack([engine.variation(half, j, range(r)) for j in range(r, 2 * r)])
     p_minus = -_stack([engine.variation(half, j, range(r)) for j in range(r)])
     window = _stencil(dm, r)
-    stencil_jacobian = full.total_jacobian(residual)
     target = sp.Matrix(g.target(one.xs[0], one.fs[0], dm.step))
     kernels = [
         Kernel("step", full.z, (("residual", residual), ("jacobian", residual.jacobian(unknown))),
                "discrete Euler–Lagrange residual at the middle node and ∂R/∂f_{K−1}",
                full.definitions),
-        Kernel("stencil", full.z, (("residual", residual), ("jacobian", stencil_jacobian)),
-               "residual and its Jacobian with respect to every stencil coordinate",
-               full.definitions + full.jacobian_definitions),
         Kernel("predict", full.z, (("guess", guess),),
                "explicit guess of f_{K−1} from the earlier elements", full.definitions),
         Kernel("target", one.z, (("target", target),), "β(x, f)"),
@@ -225,6 +221,11 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
         Kernel("lagrangian", window.z, (("value", sp.Matrix([engine.lagrangian(window, 0)])),),
                "L_d on one window of r elements", window.definitions),
     ]
+    if g.whole_trajectory:
+        kernels.append(Kernel(
+            "stencil", full.z, (("residual", residual), ("jacobian", full.total_jacobian(residual))),
+            "residual and its Jacobian with respect to every stencil coordinate",
+            full.definitions + full.jacobian_definitions))
     if r == 1:
         energy = _energy(dm, engine.lagrangian(one, 0), one.fs[0])
         kernels.append(Kernel("energy", one.z, (("value", sp.Matrix([energy])),),
@@ -268,7 +269,7 @@ def derive(dm: DiscreteModel) -> DerivedModel:
     coefficients = set(used_coefficients(expressions)) | set(g.coefficient_functions())
     return DerivedModel(name=dm.name, kind=g.kind, order=dm.order, source_dim=g.source_dim,
                         fibre_dim=g.fibre_dim, parameters=dm.parameters, defaults=dm.defaults,
-                        step=dm.step, kernels=kernels, nodes_are_unknowns=g.nodes_are_unknowns,
+                        step=dm.step, kernels=kernels, whole_trajectory=g.whole_trajectory,
                         has_energy=dm.order == 1, fingerprint=dm.fingerprint,
                         c_context=g.c_context(),
                         coefficients=tuple(sorted(coefficients, key=lambda c: c.__name__)))

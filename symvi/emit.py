@@ -124,8 +124,8 @@ def emit(dm: DerivedModel) -> CSource:
         "version": __version__, "name": dm.name, "m": dm.source_dim, "n": dm.fibre_dim,
         "K": dm.stencil_elements, "order": dm.order, "np": len(dm.parameters),
         "kernels": [_render_kernel(k, dm) for k in dm.kernels],
-        "bvp": dm.nodes_are_unknowns,
-        "group_bvp": dm.kind == "lie",
+        "bvp": dm.whole_trajectory == "nodes",
+        "group_bvp": dm.whole_trajectory == "configurations",
         "coefficients": [c_definition(c, ArrayPrinter({THETA: "theta"}))
                          for c in dm.coefficients],
         **dm.c_context,

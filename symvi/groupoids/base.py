@@ -133,11 +133,7 @@ class Groupoid(ABC):
         """Analytic coefficient functions the C reconstruction uses (exponential maps)."""
         return []
 
-    @property
-    def nodes_are_unknowns(self) -> bool:
-        """True when consecutive base points are the path's coordinates (pair groupoid).
-
-        Whole-trajectory solves then take the base points themselves as unknowns and
-        the stencil Jacobian is block-banded.
-        """
-        return False
+    #: The unknowns of a whole-trajectory solve: "nodes" (the base points themselves, pair
+    #: groupoid), "configurations" (matrix Lie groups, corrected multiplicatively; DESIGN.md
+    #: §4) or None (not supported; the stencil Jacobian is then not emitted).
+    whole_trajectory: str | None = None

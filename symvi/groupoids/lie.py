@@ -58,6 +58,7 @@ class MatrixLieGroup(Groupoid):
     """
 
     kind = "lie"
+    whole_trajectory = "configurations"
 
     def __init__(self, basis: Sequence, names=None, label: str = "G",
                  retraction: str = "cayley"):

@@ -41,6 +41,7 @@ class PairGroupoid(Groupoid):
     """
 
     kind = "pair"
+    whole_trajectory = "nodes"
 
     def __init__(self, coordinates: str | Sequence[str]):
         self.names = _names(coordinates)
@@ -58,10 +59,6 @@ class PairGroupoid(Groupoid):
     @property
     def fibre_dim(self) -> int:
         return len(self.names)
-
-    @property
-    def nodes_are_unknowns(self) -> bool:
-        return True
 
     def nodes(self, count: int) -> tuple[tuple[sp.Symbol, ...], ...]:
         """Node symbols q_0 … q_{count−1} for writing a discrete Lagrangian directly."""
