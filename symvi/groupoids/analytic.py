@@ -206,7 +206,9 @@ def minimal_structure(M: sp.Matrix, max_degree: int | None = None) -> tuple[int,
 def c_definition(cls: type[AnalyticCoefficient], printer) -> dict:
     """What ``templates/analytic.c.j2`` needs to define one coefficient in C."""
     series = [float(c) for c in cls.series]
-    while len(series) > 1 and abs(series[-1]) < 1e-22 * max(1.0, abs(series[0])):
+    # Drop trailing terms by their size at the switch, where the series is used at most.
+    size = sum(abs(c) * SWITCH ** j for j, c in enumerate(series))
+    while len(series) > 1 and abs(series[-1]) * SWITCH ** (len(series) - 1) <= 1e-20 * size:
         series.pop()
     return {"name": cls.__name__, "switch": repr(SWITCH),
             "series": [repr(c) for c in reversed(series)],
