@@ -24,6 +24,7 @@ import numpy as np
 import pytest
 import sympy as sp
 from scipy.integrate import solve_ivp
+from scipy.linalg import logm
 
 from symvi import SE2, SE3, SO3, MatrixLieGroup, Model, ModelError
 from symvi.build import compile_model
@@ -271,8 +272,31 @@ OMEGA0 = np.array([1.0, 0.5, 0.3])            # rotation about axis 1, away from
 H_LONG = 0.01
 
 
-def test_spatial_momentum_and_orthogonality(compiled):
-    mod = compiled("rigid_body")
+RIGID = ("rigid_body", "rigid_body_exp")         # Cayley and exponential retraction
+
+
+def _tau_inv(name, W):
+    if name.endswith("_exp"):
+        return np.real(logm(W))
+    return 2 * np.linalg.solve((W + np.eye(3)).T, (W - np.eye(3)).T).T
+
+
+def _dtau_inv(name, X):
+    """Right-trivialised dτ⁻¹_X on so(3) ≅ R³ (ad_X = X): Cayley I − X/2 + xxᵀ/4, exp
+    Σ B_j/j! X^j summed to convergence (B_1 = −1/2)."""
+    x = np.array([X[2, 1], X[0, 2], X[1, 0]])
+    if not name.endswith("_exp"):
+        return np.eye(3) - X / 2 + np.outer(x, x) / 4
+    out, power = np.eye(3) - X / 2, X @ X
+    for j in range(2, 60, 2):
+        out += float(sp.bernoulli(j) / sp.factorial(j)) * power
+        power = power @ X @ X
+    return out
+
+
+@pytest.mark.parametrize("name", RIGID)
+def test_spatial_momentum_and_orthogonality(compiled, name):
+    mod = compiled(name)
     N = 100_000
     res = mod.integrate((np.eye(3), [OMEGA0]), N - 1, H_LONG)
     assert res.success, res.message
@@ -288,15 +312,16 @@ def test_spatial_momentum_and_orthogonality(compiled):
     assert drift < 1e-12
     assert orth < 1e-12
     assert det < 1e-12
-    # node-0 momentum (F⁻) of the first-order rule: μ_0 = (dcay⁻¹_{hξ_0})ᵀ I ξ_0
+    # node-0 momentum (F⁻) of the first-order rule: μ_0 = (dτ⁻¹_{hξ_0})ᵀ I ξ_0
     x = H_LONG * OMEGA0
     X = np.array([[0, -x[2], x[1]], [x[2], 0, -x[0]], [-x[1], x[0], 0]])
-    dcay_inv = np.eye(3) - X / 2 + np.outer(x, x) / 4
-    np.testing.assert_allclose(res.momenta[0], dcay_inv.T @ (INERTIA * OMEGA0), rtol=1e-14)
+    np.testing.assert_allclose(res.momenta[0], _dtau_inv(name, X).T @ (INERTIA * OMEGA0),
+                               rtol=1e-14)
 
 
-def test_energy_bounded_without_drift(compiled):
-    mod = compiled("rigid_body")
+@pytest.mark.parametrize("name", RIGID)
+def test_energy_bounded_without_drift(compiled, name):
+    mod = compiled(name)
     N = 1_000_000
     res = mod.integrate((np.eye(3), [OMEGA0]), N - 1, H_LONG)
     assert res.success, res.message
@@ -314,10 +339,11 @@ def test_energy_bounded_without_drift(compiled):
     assert last <= 1.1 * first
 
 
-def test_energy_error_is_second_order(compiled):
+@pytest.mark.parametrize("name", RIGID)
+def test_energy_error_is_second_order(compiled, name):
     """The amplitude of the bounded energy error scales like h² (so it is truncation, not
     round-off): over T = 50, halving h divides it by ≈ 4."""
-    mod = compiled("rigid_body")
+    mod = compiled(name)
     amps = []
     for h in (0.02, 0.01):
         res = mod.integrate((np.eye(3), [OMEGA0]), round(50 / h), h)
@@ -351,14 +377,15 @@ def euler_reference():
     return lambda t: (sol.sol(t)[:3], sol.sol(t)[3:].reshape(3, 3))
 
 
-def test_second_order_convergence(compiled, euler_reference):
-    mod = compiled("rigid_body")
-    alg = Algebra(get("rigid_body").groupoid)
+@pytest.mark.parametrize("name", RIGID)
+def test_second_order_convergence(compiled, euler_reference, name):
+    mod = compiled(name)
+    alg = Algebra(get(name).groupoid)
     hs, err_R, err_Om = [], [], []
     for N in N_CONV:
         h = T_CONV / N
         _, Rh = euler_reference(h)
-        xi0 = alg.coords(alg.cay_inv(Rh)) / h        # R(0) = I: w_0 = R(0)ᵀR(h) exactly
+        xi0 = alg.coords(_tau_inv(name, Rh)) / h      # R(0) = I: w_0 = R(0)ᵀR(h) exactly
         res = mod.integrate((np.eye(3), [xi0]), N - 1, h)
         assert res.success, res.message
         assert res.t[-1] == pytest.approx(T_CONV) and res.g.shape == (N + 1, 3, 3)
