@@ -17,6 +17,8 @@ from .results import BVPResult, Status
 class _Pair:
     """Unknowns: the interior nodes q_r … q_{N−r} (state: all nodes)."""
 
+    approximate_updates = False
+
     def __init__(self, model, p, h):
         self.model, self.p, self.h, self.r = model, p, h, model.order
 
@@ -30,7 +32,7 @@ class _Pair:
                                         m.ptr(res), m.ptr(ab) if with_jacobian else m.ffi.NULL)
         return res, ab, bw, code == 0
 
-    def moved(self, nodes, delta, alpha):
+    def moved(self, nodes, delta, alpha, exact=True):
         trial = nodes.copy()
         trial[self.r:-self.r] += alpha * delta.reshape(-1, self.model.n)
         return trial
@@ -47,10 +49,12 @@ class _Group:
 
     Corrections above ``RELOG`` recompute ξ from the configurations (exactly on the group);
     smaller ones move ξ by its first-order change, exact to O(|η|²) ≤ 1e-14, and so avoid
-    rounding ξ to ε/h, which a second-order residual would amplify by 1/h².
+    rounding ξ to ε/h, which a second-order residual would amplify by 1/h². ``exact=False``
+    asks for the first-order change whatever the size (the line search's second try).
     """
 
     RELOG = 1e-7
+    approximate_updates = True
 
     def __init__(self, model, p, h):
         self.model, self.p, self.h, self.r = model, p, h, model.order
@@ -66,11 +70,11 @@ class _Group:
                                               m.ptr(ab) if with_jacobian else m.ffi.NULL)
         return res, ab, bw, code == 0
 
-    def moved(self, state, delta, alpha):
+    def moved(self, state, delta, alpha, exact=True):
         m = self.model
         g, xi = state[0].copy(), state[1].copy()
         failed = m.ffi.new("long *")
-        relog = int(alpha * float(np.abs(delta).max(initial=0.0)) > self.RELOG)
+        relog = int(exact and alpha * float(np.abs(delta).max(initial=0.0)) > self.RELOG)
         code = m.lib.symvi_group_bvp_update(m.ptr(g), m.ptr(xi), m.ptr(delta), alpha,
                                             xi.shape[0], m.ptr(self.p), self.h, relog, failed)
         return (g, xi) if code == 0 else None
@@ -116,7 +120,8 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
             return state.raise_for_status() if raise_on_failure else state
     state, norms, steps, status, message = _newton(problem, state, maxiter, xtol, ftol)
     if status == Status.SUCCESS:
-        message = f"converged in {len(steps)} Newton iterations, residual norm {norms[-1]:.3e}"
+        message = (f"converged in {len(steps)} Newton iterations, residual norm "
+                   f"{norms[-1]:.3e}{message}")
     else:
         message += f"; residual norm {norms[-1]:.3e}"
     common = dict(t=h * np.arange(N + 1), iterations=len(steps),
@@ -157,8 +162,10 @@ def _newton(problem, state, maxiter: int, xtol: float, ftol: float):
         else:
             state, taken = _line_search(problem, state, delta, res)
         if taken is None:
-            if norms[-1] <= _rounding_level(ab, bw, problem.magnitudes(state)):
+            level = _rounding_level(ab, bw, problem.magnitudes(state))
+            if norms[-1] <= level:
                 status = Status.SUCCESS  # no descent left below the rounding level
+                message = f" (at the rounding level {level:.1e} of the residual)"
             else:
                 status, message = Status.STALLED, f"line search stalled at iteration {it}"
             break
@@ -190,12 +197,19 @@ def _rounding_level(ab: np.ndarray, bw: int, u: np.ndarray) -> float:
 
 
 def _line_search(problem, state, delta, res, min_alpha: float = 2.0**-12):
-    """Backtrack α = 1, ½, … until ‖R‖₂ decreases (Armijo, c = 1e-4)."""
+    """Backtrack α = 1, ½, … until ‖R‖₂ decreases (Armijo, c = 1e-4).
+
+    Each α is tried with the exact update, then with the first-order one (on groups,
+    recomputing ξ from the configurations adds a rounding floor to the residual that a
+    small final correction cannot get below).
+    """
     base = float(np.dot(res, res))
     alpha = 1.0
     while alpha >= min_alpha:
-        trial = problem.moved(state, delta, alpha)
-        if trial is not None:
+        for exact in (True, False) if problem.approximate_updates else (True,):
+            trial = problem.moved(state, delta, alpha, exact)
+            if trial is None:
+                continue
             trial_res, _, _, finite = problem.assemble(trial, False)
             if finite and float(np.dot(trial_res, trial_res)) <= (1 - 1e-4 * alpha) * base:
                 return trial, alpha * float(np.abs(delta).max(initial=0.0))
@@ -206,7 +220,7 @@ def _line_search(problem, state, delta, res, min_alpha: float = 2.0**-12):
 def _pair_state(model, start, end, N: int, guess) -> np.ndarray:
     r, n = model.order, model.n
     start = arguments.finite_array(start, (r, n), f"start nodes q_0..q_{r - 1}")
-    end = arguments.finite_array(end, (r, n), f"end nodes q_{{N-{r - 1}}}..q_N")
+    end = arguments.finite_array(end, (r, n), f"end nodes q_{N - r + 1}..q_{N}")
     count = N + 1 - 2 * r
     if guess is None:
         s = np.linspace(0.0, 1.0, count + 2)[1:-1, None]
@@ -219,8 +233,8 @@ def _pair_state(model, start, end, N: int, guess) -> np.ndarray:
 def _group_state(model, start, end, N: int, guess, p, h):
     """(g, ξ) from the fixed and guessed configurations, or a failed BVPResult."""
     r, d = model.order, model.matrix_dims[0]
-    start = arguments.finite_array(start, (r, d, d), "start configurations g_0..g_{r-1}")
-    end = arguments.finite_array(end, (r, d, d), "end configurations g_{N-r+1}..g_N")
+    start = arguments.finite_array(start, (r, d, d), f"start configurations g_0..g_{r - 1}")
+    end = arguments.finite_array(end, (r, d, d), f"end configurations g_{N - r + 1}..g_{N}")
     count = N + 1 - 2 * r
     if guess is None:
         chord = _increments(model, np.stack([start[-1], end[0]]), p, 1.0,
