@@ -24,9 +24,11 @@ import sympy as sp
 
 #: θ = √s in closed forms.
 THETA = sp.Symbol("theta", positive=True)
-#: Below this s the Taylor series is used; above it the closed form (its cancellation is
-#: then at most a few ulps, and the series has converged to below 1e-17).
-SWITCH = 4.0
+#: Below this s the Taylor series is used, above it the closed form. Just above π², the
+#: exponential's chart θ < π: inside the chart only the series is used (the closed forms
+#: of the derivatives cancel badly at moderate θ; the series of dexp⁻¹, with radius 4π² in
+#: s, converges like (s/4π²)^j, below 1e-20 with the 40 terms kept).
+SWITCH = 10.0
 _Z, _R, _U, _S = sp.symbols("z r u s")
 _TERMS = 40
 
@@ -65,12 +67,14 @@ class AnalyticCoefficient(sp.Function):
         return derivative(type(self))(self.args[0])
 
     def _eval_evalf(self, prec):
-        s = self.args[0].evalf(prec)
+        # Arbitrary precision: the series only where its 40 terms exceed any precision
+        # asked for, else the closed form with guard digits against its cancellation.
+        s = self.args[0].evalf(prec + 100)
         if not s.is_Number:
             return None
-        if s < SWITCH:
+        if abs(s) < 1e-2:
             return sp.Float(sum(c * s ** j for j, c in enumerate(self.series)), prec)
-        return self.closed.xreplace({THETA: sp.sqrt(s)}).evalf(prec)
+        return sp.Float(self.closed.xreplace({THETA: sp.sqrt(s)}).evalf(prec + 100), prec)
 
     @classmethod
     def numeric(cls, s):
