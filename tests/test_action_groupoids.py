@@ -54,6 +54,7 @@ from scipy.linalg import expm, logm
 from scipy.spatial.transform import Rotation
 
 from conftest import ACTION, LIE
+from group_oracle import assert_stationary, oracle
 import symvi
 from symvi import (SO3, ActionGroupoid, Model, ModelError, PairGroupoid,
                    ProductGroupoid)
@@ -194,43 +195,12 @@ def recompute_base_points(geo: Geometry, x, f, h, start):
 # ---------------------------------------------------------------------------------------
 # 1. Variational oracle
 # ---------------------------------------------------------------------------------------
-EPS_FD = 1e-3
 TOL = 1e-8
 N_ORACLE = 20
 H_ORACLE = 0.05
 ORACLE_MODELS = LIE + ACTION
 
 
-@dataclass(frozen=True)
-class OracleResult:
-    nodes: np.ndarray
-    relative: np.ndarray   # max_a |∂S/∂ε_a| / scale
-    noise: np.ndarray      # rounding bound / scale
-
-
-def oracle(mod, vary, n, x, f, h, nodes, eps=EPS_FD) -> OracleResult:
-    """``vary(x, f, j, a, ε)`` → the varied path, for a = 0 … n − 1."""
-    def windows(xx, ff):
-        return mod.model.along("lagrangian", xx, ff, h)[:, 0]
-
-    base = windows(x, f)
-    rel, noise = [], []
-    for j in nodes:
-        grads, scales, floors = [], [], []
-        for a in range(n):
-            vals = {s: windows(*vary(x, f, j, a, s * eps)) for s in (-2, -1, 1, 2)}
-            terms = (-vals[2] + 8 * vals[1] - 8 * vals[-1] + vals[-2]) / (12 * eps)
-            touched = terms != 0
-            grads.append(math.fsum(terms))
-            scales.append(np.abs(terms))
-            # a few ulp of each touched window and of the retraction round trip (a shift
-            # of ~u in ε, worth u·|∂L_w/∂ε|); the five-point weights sum to 18/12ε
-            floors.append(18 / (12 * eps) * 4 * U
-                          * (np.abs(base[touched]).sum() + np.abs(terms).sum()))
-        scale = np.max(scales, axis=0).sum()
-        rel.append(max(abs(g) for g in grads) / scale)
-        noise.append(max(floors) / scale)
-    return OracleResult(np.asarray(nodes), np.asarray(rel), np.asarray(noise))
 
 
 @dataclass(frozen=True)
@@ -321,13 +291,7 @@ def test_computed_path_is_stationary_under_group_variations(name, cases):
     nodes = enforced_nodes(case.mod.model.order, case.f.shape[0])
     assert len(nodes) >= N_ORACLE - 1
     out = oracle(case.mod, case.vary, case.geo.n, case.x, case.f, H_ORACLE, nodes)
-    assert out.noise.max() < TOL / 10, f"FD noise floor {out.noise.max():.2e} too high"
-    worst = int(np.argmax(out.relative))
-    print(f"{name}: max relative gradient {out.relative.max():.2e} "
-          f"(noise bound {out.noise.max():.1e})")
-    assert out.relative.max() < TOL, (
-        f"{name}: action not stationary at node {out.nodes[worst]}: relative gradient "
-        f"{out.relative[worst]:.3e}")
+    assert_stationary(name, out, TOL)
 
 
 @pytest.mark.parametrize("name", ORACLE_MODELS)

@@ -17,7 +17,6 @@
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -29,6 +28,10 @@ from scipy.linalg import logm
 from symvi import SE2, SE3, SO3, MatrixLieGroup, Model, ModelError
 from symvi.build import compile_model
 from symvi.models import get
+
+from group_oracle import EPS_FD
+from group_oracle import assert_stationary
+from group_oracle import oracle as group_oracle
 
 U = np.finfo(float).eps
 
@@ -102,42 +105,14 @@ def vary_node(alg: Algebra, f, k, a, eps, h):
 # round-off. TOL = 1e-8 is far above all of this, while the negative control (one
 # increment moved by 1e-3) gives ≳ 3e-4 relative, over four orders above TOL
 # (measured 3.7e-4 rigid body, 4.4e-4 SE(2), 5e-2 second order).
-EPS_FD = 1e-3
 TOL = 1e-8
 N_ORACLE = 40
 
 
-@dataclass(frozen=True)
-class OracleResult:
-    nodes: np.ndarray
-    relative: np.ndarray   # max_a |∂S/∂ε_a| / scale
-    noise: np.ndarray      # rounding bound / scale
-
-
-def oracle(mod, alg: Algebra, x, f, h, nodes, eps=EPS_FD) -> OracleResult:
-    def windows(ff):
-        return mod.model.along("lagrangian", x, ff, h)[:, 0]
-
-    base = windows(f)
-    rel, noise = [], []
-    for k in nodes:
-        grads, scales, floors = [], [], []
-        for a in range(alg.n):
-            vals = {s: windows(vary_node(alg, f, k, a, s * eps, h)) for s in (-2, -1, 1, 2)}
-            terms = (-vals[2] + 8 * vals[1] - 8 * vals[-1] + vals[-2]) / (12 * eps)
-            touched = terms != 0
-            grads.append(math.fsum(terms))
-            scales.append(np.abs(terms))
-            # a few ulp of every touched window value (and of its Cayley round trip)
-            # each evaluation: a few ulp of L_w, plus the Cayley round trip's absolute
-            # error of a few ulp in hξ, i.e. a shift of ~u in ε (≈ u·|∂L_w/∂ε|); the
-            # five-point weights sum to 18/12ε
-            floors.append(18 / (12 * eps) * 4 * U
-                          * (np.abs(base[touched]).sum() + np.abs(terms).sum()))
-        scale = np.max(scales, axis=0).sum()
-        rel.append(max(abs(g) for g in grads) / scale)
-        noise.append(max(floors) / scale)
-    return OracleResult(np.asarray(nodes), np.asarray(rel), np.asarray(noise))
+def oracle(mod, alg: Algebra, x, f, h, nodes, eps=EPS_FD):
+    """The shared group oracle with the Cayley node variations of ``vary_node``."""
+    return group_oracle(mod, lambda xx, ff, k, a, e: (xx, vary_node(alg, ff, k, a, e, h)),
+                        alg.n, x, f, h, nodes, eps)
 
 
 def enforced_nodes(order, E):
@@ -222,13 +197,7 @@ def test_computed_path_is_stationary_under_group_variations(name, cases):
     nodes = enforced_nodes(case.order, res.f.shape[0])
     assert len(nodes) >= 38
     out = oracle(case.mod, case.alg, res.x, res.f, case.h, nodes)
-    assert out.noise.max() < TOL / 10, f"FD noise floor {out.noise.max():.2e} too high"
-    worst = int(np.argmax(out.relative))
-    print(f"{name}: max relative gradient {out.relative.max():.2e} "
-          f"(noise bound {out.noise.max():.1e})")
-    assert out.relative.max() < TOL, (
-        f"{name}: action not stationary at node {out.nodes[worst]}: relative gradient "
-        f"{out.relative[worst]:.3e}")
+    assert_stationary(name, out, TOL)
 
 
 @pytest.mark.parametrize("name", CASES)
