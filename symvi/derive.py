@@ -30,7 +30,7 @@ import sympy as sp
 from .discretise import DiscreteModel
 from .errors import ModelError
 from .groupoids.analytic import used_coefficients
-from .rank import generic_rank, sequential_lambdify
+from .rank import generic_rank
 
 
 @dataclass(frozen=True)
@@ -47,19 +47,6 @@ class Kernel:
     #: Intermediate quantities (symbol, expression), in evaluation order; outputs and
     #: later definitions may use the symbols.
     definitions: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()
-
-    def expanded(self) -> tuple[tuple[str, sp.Matrix], ...]:
-        """The outputs as expressions of z alone (definitions substituted)."""
-        outputs = self.outputs
-        for symbol, expr in reversed(self.definitions):
-            outputs = tuple((n, M.xreplace({symbol: expr})) for n, M in outputs)
-        return outputs
-
-    def numeric(self, args: Sequence[sp.Symbol]):
-        """A NumPy function of ``args`` (z, parameters, h) returning the flat outputs,
-        evaluating the definitions in order (used by checks and tests)."""
-        return sequential_lambdify(args, self.definitions,
-                                   [e for _, M in self.outputs for e in M])
 
 
 @dataclass(frozen=True, eq=False)

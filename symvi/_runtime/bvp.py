@@ -23,14 +23,8 @@ class _Pair:
         self.model, self.p, self.h, self.r = model, p, h, model.order
 
     def assemble(self, nodes, with_jacobian: bool):
-        m = self.model
-        unknown = nodes.shape[0] * m.n - 2 * self.r * m.n
-        bw = int(m.lib.symvi_bvp_bandwidth())
-        res = np.zeros(unknown)
-        ab = np.zeros((2 * bw + 1, unknown)) if with_jacobian else None
-        code = m.lib.symvi_bvp_assemble(m.ptr(nodes), nodes.shape[0], m.ptr(self.p), self.h,
-                                        m.ptr(res), m.ptr(ab) if with_jacobian else m.ffi.NULL)
-        return res, ab, bw, code == 0
+        return _assemble(self.model, self.model.lib.symvi_bvp_assemble, nodes, nodes.shape[0],
+                         nodes.shape[0] - 2 * self.r, self.p, self.h, with_jacobian)
 
     def moved(self, nodes, delta, alpha, exact=True):
         trial = nodes.copy()
@@ -60,15 +54,9 @@ class _Group:
         self.model, self.p, self.h, self.r = model, p, h, model.order
 
     def assemble(self, state, with_jacobian: bool):
-        m, (_, xi) = self.model, state
-        unknown = (xi.shape[0] + 1 - 2 * self.r) * m.n
-        bw = int(m.lib.symvi_bvp_bandwidth())
-        res = np.zeros(unknown)
-        ab = np.zeros((2 * bw + 1, unknown)) if with_jacobian else None
-        code = m.lib.symvi_group_bvp_assemble(m.ptr(xi), xi.shape[0], m.ptr(self.p), self.h,
-                                              m.ptr(res),
-                                              m.ptr(ab) if with_jacobian else m.ffi.NULL)
-        return res, ab, bw, code == 0
+        xi = state[1]
+        return _assemble(self.model, self.model.lib.symvi_group_bvp_assemble, xi, xi.shape[0],
+                         xi.shape[0] + 1 - 2 * self.r, self.p, self.h, with_jacobian)
 
     def moved(self, state, delta, alpha, exact=True):
         m = self.model
@@ -84,6 +72,22 @@ class _Group:
 
     def magnitudes(self, state) -> np.ndarray:
         return np.ones((state[1].shape[0] + 1 - 2 * self.r) * self.model.n)
+
+
+def _assemble(model, function, data, count: int, free_nodes: int, p, h, with_jacobian: bool):
+    """Residuals at the free nodes and (optionally) their banded Jacobian, from C.
+
+    ``function`` is the C assembler, called on ``data`` (nodes, resp. increments) and
+    their ``count``; the Jacobian comes in LAPACK band layout with ``bw`` sub- and
+    super-diagonals.
+    """
+    unknown = free_nodes * model.n
+    bw = int(model.lib.symvi_bvp_bandwidth())
+    res = np.zeros(unknown)
+    ab = np.zeros((2 * bw + 1, unknown)) if with_jacobian else None
+    code = function(model.ptr(data), count, model.ptr(p), h, model.ptr(res),
+                    model.ptr(ab) if with_jacobian else model.ffi.NULL)
+    return res, ab, bw, code == 0
 
 
 def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=None,

@@ -170,22 +170,23 @@ def rational_coefficients(family: Family, a: int, b: int) -> tuple[sp.Expr, ...]
                  for c in _closed_forms(family, a, b))
 
 
-def apply_rational(family: Family, a: int, b: int, M: sp.Matrix, s: sp.Expr) -> sp.Matrix:
-    """f(M) = Σ_k c_k(s) M^k with the rational coefficients of ``family``."""
+def _polynomial(values, M: sp.Matrix) -> sp.Matrix:
+    """Σ_k values[k] M^k."""
     out, power = sp.zeros(*M.shape), sp.eye(M.shape[0])
-    for c in rational_coefficients(family, a, b):
-        out += c.xreplace({_S: s}) * power
+    for c in values:
+        out += c * power
         power = power * M
     return out
+
+
+def apply_rational(family: Family, a: int, b: int, M: sp.Matrix, s: sp.Expr) -> sp.Matrix:
+    """f(M) = Σ_k c_k(s) M^k with the rational coefficients of ``family``."""
+    return _polynomial([c.xreplace({_S: s}) for c in rational_coefficients(family, a, b)], M)
 
 
 def apply(family: Family, a: int, b: int, M: sp.Matrix, s: sp.Expr) -> sp.Matrix:
     """f(M) = Σ_k c_k(s) M^k (the caller guarantees M^a (M² + s)^b = 0)."""
-    out, power = sp.zeros(*M.shape), sp.eye(M.shape[0])
-    for c in coefficients(family, a, b):
-        out += c(s) * power
-        power = power * M
-    return out
+    return _polynomial([c(s) for c in coefficients(family, a, b)], M)
 
 
 def minimal_structure(M: sp.Matrix, max_degree: int | None = None) -> tuple[int, int, sp.Expr] | None:

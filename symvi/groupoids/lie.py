@@ -110,16 +110,13 @@ class MatrixLieGroup(Groupoid):
         X = self.hat(x)
         return sp.Matrix.hstack(*[self.coordinates(X * E - E * X) for E in self.basis])
 
+    @cached_property
     def minimal_structure(self) -> dict | None:
         """The closed-form structure of X and ad_X, or None (see :mod:`.analytic`).
 
         ``matrix``, ``adjoint``: (a, b) with M^a (M² + θ²)^b = 0; ``theta_squared(x)``: θ²
         as a function of the coordinates; ``quadratic_form``: its matrix (θ² = xᵀQx).
         """
-        return self._structure
-
-    @cached_property
-    def _structure(self) -> dict | None:
         x = sp.symbols(f"x0:{self.fibre_dim}", real=True)
         matrix = analytic.minimal_structure(self.hat(x))
         adjoint = analytic.minimal_structure(self.ad(x))

@@ -65,9 +65,9 @@ class Cayley(Retraction):
     def matrix(self, x):
         """cay(X); a polynomial in X with rational coefficients in θ² when the group has a
         minimal-polynomial structure (compact expressions), else (I − X/2)⁻¹(I + X/2)."""
-        structure = self.group.minimal_structure()
+        structure = self.group.minimal_structure
         if structure is not None:
-            (a, b), _ = structure["matrix"], structure["adjoint"]
+            a, b = structure["matrix"]
             return analytic.apply_rational(analytic.CAYLEY, a, b, self.group.hat(x),
                                            structure["theta_squared"](x))
         X, eye = self.group.hat(x), sp.eye(self.group.matrix_dim)
@@ -85,7 +85,7 @@ class Exponential(Retraction):
 
     def __init__(self, group: "MatrixLieGroup"):
         super().__init__(group)
-        structure = group.minimal_structure()
+        structure = group.minimal_structure
         if structure is None:
             raise ModelError(
                 f"{group.label}: no closed form of the exponential retraction: X and ad_X do "
