@@ -47,6 +47,9 @@ class Kernel:
     #: Intermediate quantities (symbol, expression), in evaluation order; outputs and
     #: later definitions may use the symbols.
     definitions: tuple[tuple[sp.Symbol, sp.Expr], ...] = ()
+    #: Whether z is a window of consecutive elements (x_0, f_0, …), so that the kernel
+    #: can be evaluated along a path.
+    along: bool = True
 
 
 @dataclass(frozen=True, eq=False)
@@ -62,12 +65,15 @@ class DerivedModel:
     defaults: tuple[float, ...]
     step: sp.Symbol
     kernels: tuple[Kernel, ...]
-    whole_trajectory: str | None
+    whole_trajectory: bool
     has_energy: bool
     fingerprint: str
     c_context: dict
     #: Analytic coefficient functions (exponential retraction) the C must define.
     coefficients: tuple = ()
+    #: Number s of constraints per window (multipliers λ^k ∈ R^s) and of controls.
+    constraint_count: int = 0
+    control_count: int = 0
 
     @property
     def stencil_elements(self) -> int:
@@ -88,6 +94,9 @@ class _Stencil:
     jacobian_definitions: tuple[tuple[sp.Symbol, sp.Expr], ...]
     #: dx_j/dz for every base point (entries are expressions or definition symbols).
     source_jacobians: tuple[sp.Matrix, ...]
+    #: Multipliers λ^w of the windows w = 0, 1, … starting at the stencil's elements
+    #: (constrained models; the last coordinates of z).
+    multipliers: tuple[tuple[sp.Symbol, ...], ...] = ()
 
     def total_jacobian(self, R: sp.Matrix) -> sp.Matrix:
         """dR/dz, with the chain rule through the named base points."""
@@ -114,12 +123,14 @@ def _name_entries(E: sp.Matrix, prefix: str, out: list) -> sp.Matrix:
     return sp.Matrix(E.shape[0], E.shape[1], entry)
 
 
-def _stencil(dm: DiscreteModel, elements: int) -> _Stencil:
+def _stencil(dm: DiscreteModel, elements: int, windows: int = 0) -> _Stencil:
     g = dm.groupoid
     x0 = tuple(sp.Dummy(f"x_{i}", real=True) for i in range(g.source_dim))
     fs = tuple(tuple(sp.Dummy(f"f{k}_{i}", real=True) for i in range(g.fibre_dim))
                for k in range(elements))
-    z = x0 + tuple(s for f in fs for s in f)
+    lams = tuple(tuple(sp.Dummy(f"lam{w}_{a}", real=True) for a in range(len(dm.multipliers)))
+                 for w in range(windows))
+    z = x0 + tuple(s for f in fs for s in f) + tuple(s for lam in lams for s in lam)
     xs, definitions, jacobian_definitions = [x0], [], []
     D = [_selector(x0, z)]
     for k in range(elements - 1):
@@ -138,19 +149,25 @@ def _stencil(dm: DiscreteModel, elements: int) -> _Stencil:
         xs.append(named)
         D.append(_name_entries(E, f"Dx{k + 1}", jacobian_definitions))
     return _Stencil(z, tuple(xs), fs, tuple(definitions), tuple(jacobian_definitions),
-                    tuple(D))
+                    tuple(D), lams)
 
 
 class _Engine:
-    """Node variations of the action sum of one discrete model."""
+    """Node variations of the (augmented) action sum of one discrete model.
+
+    With constraints the varied function is L_d + λ_A Φ^A_d, λ the multipliers of the
+    window (paper §3.2, eq. ``constrainedso``).
+    """
 
     def __init__(self, dm: DiscreteModel):
         self.dm = dm
+        augmented = dm.lagrangian + sum(l * c for l, c in zip(dm.multipliers, dm.constraints))
         self.gradients = tuple(
-            sp.Matrix([sp.diff(dm.lagrangian, s) for s in x + f]) for x, f in dm.slots)
+            sp.Matrix([sp.diff(augmented, s) for s in x + f]) for x, f in dm.slots)
 
     def _window_mapping(self, st: _Stencil, w: int) -> dict:
-        mapping = {}
+        lams = st.multipliers[w] if w < len(st.multipliers) else (0,) * len(self.dm.multipliers)
+        mapping = dict(zip(self.dm.multipliers, lams))
         for j, (X, F) in enumerate(self.dm.slots):
             mapping.update(zip(X, st.xs[w + j]))
             mapping.update(zip(F, st.fs[w + j]))
@@ -172,6 +189,11 @@ class _Engine:
     def lagrangian(self, st: _Stencil, w: int) -> sp.Expr:
         return self.dm.lagrangian.xreplace(self._window_mapping(st, w))
 
+    def window_values(self, st: _Stencil, w: int, exprs) -> sp.Matrix:
+        """Slot expressions (constraints, controls) on window w of the stencil."""
+        mapping = self._window_mapping(st, w)
+        return sp.Matrix([e.xreplace(mapping) for e in exprs])
+
 
 def _stack(vectors) -> sp.Matrix:
     return sp.Matrix.vstack(*vectors)
@@ -179,45 +201,70 @@ def _stack(vectors) -> sp.Matrix:
 
 def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
     engine, r, g = _Engine(dm), dm.order, dm.groupoid
-    full = _stencil(dm, 2 * r)
+    constrained = bool(dm.constraints)
+    full = _stencil(dm, 2 * r, windows=r + 1 if constrained else 0)
     residual = engine.variation(full, r, range(r + 1))
+    one = _stencil(dm, 1)
+    window = _stencil(dm, r)
+    target = sp.Matrix(g.target(one.xs[0], one.fs[0], dm.step))
+    kernels = [] if constrained else _step_kernels(dm, engine, full, residual)
+    kernels += [
+        Kernel("target", one.z, (("target", target),), "β(x, f)"),
+        Kernel("variations", one.z, (("right", g.right(one.xs[0], one.fs[0], dm.step)),
+                                     ("left", g.left(one.xs[0], one.fs[0], dm.step))),
+               "node variations of one element: d(x, f)/dε of g·σ_a(ε) and σ_a(ε)⁻¹·g"),
+        Kernel("lagrangian", window.z, (("value", sp.Matrix([engine.lagrangian(window, 0)])),),
+               "L_d on one window of r elements", window.definitions),
+    ]
+    if g.whole_trajectory:
+        eta = tuple(sp.Dummy(f"eta_{a}", real=True) for a in range(g.fibre_dim))
+        kernels += [
+            Kernel("stencil", full.z,
+                   (("residual", residual), ("jacobian", full.total_jacobian(residual))),
+                   "residual and its Jacobian with respect to every stencil coordinate "
+                   "(multipliers of the r+1 windows last)",
+                   full.definitions + full.jacobian_definitions, along=not constrained),
+            Kernel("move", one.xs[0] + eta, (("x", sp.Matrix(g.move(one.xs[0], eta))),),
+                   "base point of a node after the variation g -> g tau(eta)", along=False)]
+    if constrained:
+        phi = engine.window_values(window, 0, dm.constraints)
+        kernels.append(Kernel(
+            "constraint", window.z, (("value", phi), ("jacobian", window.total_jacobian(phi))),
+            "discrete constraints Phi_d on one window and their Jacobian",
+            window.definitions + window.jacobian_definitions))
+    if dm.controls:
+        kernels.append(Kernel("controls", window.z,
+                              (("value", engine.window_values(window, 0, dm.controls)),),
+                              "controls u at the window's quadrature point", window.definitions))
+    if r == 1:
+        energy = _energy(dm, engine.lagrangian(one, 0), one.fs[0])
+        kernels.append(Kernel("energy", one.z, (("value", sp.Matrix([energy])),),
+                              "discrete energy E_d = −∂L_d/∂h (Kane, Marsden & Ortiz)"))
+    return tuple(kernels)
+
+
+def _step_kernels(dm: DiscreteModel, engine: _Engine, full: _Stencil,
+                  residual: sp.Matrix) -> list[Kernel]:
+    """The step map and the discrete Legendre transforms (unconstrained models)."""
+    r, g = dm.order, dm.groupoid
     unknown = full.fs[-1]
     guess = sp.Matrix(g.predictor(full.xs[:-1], full.fs[:-1]))
-    one = _stencil(dm, 1)
     half = _stencil(dm, 2 * r - 1)
     p_plus = _stack([engine.variation(half, j, range(r)) for j in range(r, 2 * r)])
     p_minus = -_stack([engine.variation(half, j, range(r)) for j in range(r)])
-    window = _stencil(dm, r)
-    target = sp.Matrix(g.target(one.xs[0], one.fs[0], dm.step))
-    kernels = [
+    return [
         Kernel("step", full.z, (("residual", residual), ("jacobian", residual.jacobian(unknown))),
                "discrete Euler–Lagrange residual at the middle node and ∂R/∂f_{K−1}",
                full.definitions),
         Kernel("predict", full.z, (("guess", guess),),
                "explicit guess of f_{K−1} from the earlier elements", full.definitions),
-        Kernel("target", one.z, (("target", target),), "β(x, f)"),
-        Kernel("variations", one.z, (("right", g.right(one.xs[0], one.fs[0], dm.step)),
-                                     ("left", g.left(one.xs[0], one.fs[0], dm.step))),
-               "node variations of one element: d(x, f)/dε of g·σ_a(ε) and σ_a(ε)⁻¹·g"),
         Kernel("momentum_plus", half.z, (("momentum", p_plus),),
                "F⁺L_d: momenta at the last r nodes from the 2r−1 elements before them",
                half.definitions),
         Kernel("momentum_minus", half.z, (("momentum", p_minus),),
                "F⁻L_d: momenta at the first r nodes from the 2r−1 elements after them",
                half.definitions),
-        Kernel("lagrangian", window.z, (("value", sp.Matrix([engine.lagrangian(window, 0)])),),
-               "L_d on one window of r elements", window.definitions),
     ]
-    if g.whole_trajectory:
-        kernels.append(Kernel(
-            "stencil", full.z, (("residual", residual), ("jacobian", full.total_jacobian(residual))),
-            "residual and its Jacobian with respect to every stencil coordinate",
-            full.definitions + full.jacobian_definitions))
-    if r == 1:
-        energy = _energy(dm, engine.lagrangian(one, 0), one.fs[0])
-        kernels.append(Kernel("energy", one.z, (("value", sp.Matrix([energy])),),
-                              "discrete energy E_d = −∂L_d/∂h (Kane, Marsden & Ortiz)"))
-    return tuple(kernels)
 
 
 def _energy(dm: DiscreteModel, Ld: sp.Expr, f: Sequence[sp.Symbol]) -> sp.Expr:
@@ -247,9 +294,14 @@ def _check_regular(dm: DiscreteModel, step: Kernel) -> None:
 
 
 def derive(dm: DiscreteModel) -> DerivedModel:
-    """Derive every kernel of ``dm`` and check that its step map is regular."""
+    """Derive every kernel of ``dm`` and check that its step map is regular.
+
+    Constrained models have no step map (they are solved as whole trajectories); their
+    regularity is that of the bordered Hessian, checked on the continuous model.
+    """
     kernels = _kernels(dm)
-    _check_regular(dm, kernels[0])
+    if not dm.constraints:
+        _check_regular(dm, kernels[0])
     g = dm.groupoid
     expressions = [e for k in kernels for _, M in k.outputs for e in M] \
         + [e for k in kernels for _, e in k.definitions]
@@ -258,5 +310,6 @@ def derive(dm: DiscreteModel) -> DerivedModel:
                         fibre_dim=g.fibre_dim, parameters=dm.parameters, defaults=dm.defaults,
                         step=dm.step, kernels=kernels, whole_trajectory=g.whole_trajectory,
                         has_energy=dm.order == 1, fingerprint=dm.fingerprint,
+                        constraint_count=len(dm.constraints), control_count=len(dm.controls),
                         c_context=g.c_context(),
                         coefficients=tuple(sorted(coefficients, key=lambda c: c.__name__)))

@@ -39,8 +39,12 @@ class Rule:
         return self.name in groupoid.rules(self.order)
 
     def build(self, groupoid: Groupoid, L: sp.Expr, xs, fs, step: sp.Expr) -> sp.Expr:
-        return step * sum(w * L.xreplace(point)
-                          for w, point in groupoid.quadrature(self.name, xs, fs, step))
+        return step * self.average(groupoid, L, xs, fs, step)
+
+    def average(self, groupoid: Groupoid, F: sp.Expr, xs, fs, step: sp.Expr) -> sp.Expr:
+        """Σ w_i F(point_i): the quadrature's weighted mean of F over one window."""
+        return sum(w * F.xreplace(point)
+                   for w, point in groupoid.quadrature(self.name, xs, fs, step))
 
 
 #: Registry of discretisation rules by name.
@@ -76,6 +80,12 @@ class DiscreteModel:
     defaults: tuple[float, ...]
     continuous_lagrangian: sp.Expr | None
     fingerprint: str
+    #: Discrete constraints Φ^A_d (slot coordinates) and their multipliers λ_A (paper
+    #: §3.2: the augmented L_d + λ_A Φ^A_d on every window).
+    constraints: tuple[sp.Expr, ...] = ()
+    multipliers: tuple[sp.Symbol, ...] = ()
+    #: Controls at a window's quadrature point (slot coordinates).
+    controls: tuple[sp.Expr, ...] = ()
 
 
 def slot_symbols(groupoid: Groupoid, order: int) -> tuple[Slot, ...]:
@@ -92,11 +102,18 @@ def discretise(model: "Model") -> DiscreteModel:
     slots = slot_symbols(g, model.order)
     xs, fs = [s[0] for s in slots], [s[1] for s in slots]
     if model.lagrangian is not None:
-        Ld = RULES[model.discretisation].build(g, model.lagrangian, xs, fs, h)
+        rule = RULES[model.discretisation]
+        Ld = rule.build(g, model.lagrangian, xs, fs, h)
+        constraints = tuple(rule.build(g, c, xs, fs, h) for c in model.constraints)
+        controls = tuple(rule.average(g, u, xs, fs, h) for u in model.controls)
     else:
-        Ld = model.discrete_lagrangian.xreplace(g.discrete_mapping(model.order, xs, fs))
+        mapping = g.discrete_mapping(model.order, xs, fs)
+        Ld = model.discrete_lagrangian.xreplace(mapping)
+        constraints, controls = tuple(c.xreplace(mapping) for c in model.constraints), ()
+    multipliers = tuple(sp.Dummy(f"lambda{a}", real=True) for a in range(len(constraints)))
     return DiscreteModel(name=model.name, groupoid=g, order=model.order, slots=slots,
                          lagrangian=Ld, step=h, parameters=model.parameter_symbols,
                          defaults=model.parameter_defaults,
                          continuous_lagrangian=model.lagrangian,
-                         fingerprint=model.fingerprint())
+                         fingerprint=model.fingerprint(), constraints=constraints,
+                         multipliers=multipliers, controls=controls)

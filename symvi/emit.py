@@ -113,7 +113,7 @@ def _render_kernel(kernel: Kernel, dm: DerivedModel) -> dict:
             lines.append(f"{out_name}[{i}] = {printer.doprint(reduced[position])};")
             position += 1
         outputs.append({"name": out_name, "size": len(M), "assignments": lines})
-    return {"name": kernel.name, "doc": kernel.doc, "nz": len(kernel.z),
+    return {"name": kernel.name, "doc": kernel.doc, "nz": len(kernel.z), "along": kernel.along,
             "temporaries": temporaries, "outputs": outputs}
 
 
@@ -124,16 +124,26 @@ def emit(dm: DerivedModel) -> CSource:
         "version": __version__, "name": dm.name, "m": dm.source_dim, "n": dm.fibre_dim,
         "K": dm.stencil_elements, "order": dm.order, "np": len(dm.parameters),
         "kernels": [_render_kernel(k, dm) for k in dm.kernels],
-        "bvp": dm.whole_trajectory == "nodes",
-        "group_bvp": dm.whole_trajectory == "configurations",
+        "whole_trajectory": dm.whole_trajectory, "constraints": dm.constraint_count,
         "coefficients": [c_definition(c, ArrayPrinter({THETA: "theta"}))
                          for c in dm.coefficients],
         **dm.c_context,
+        "groups": _with_configuration_offsets(dm.c_context["groups"]),
     }
     c_source = env.get_template("module.c.j2").render(**context)
     cdef = env.get_template("cdef.h.j2").render(**context)
     digest = hashlib.sha256((c_source + cdef).encode()).hexdigest()
     return CSource(c_source, cdef, digest)
+
+
+def _with_configuration_offsets(groups: list[dict]) -> list[dict]:
+    """Each group factor with ``g_offset``, where its d×d block starts in a node's
+    configuration (the factors' matrices, concatenated)."""
+    out, at = [], 0
+    for G in groups:
+        out.append(G | {"g_offset": at})
+        at += G["matrix_dim"] ** 2
+    return out
 
 
 def templates_digest() -> str:

@@ -98,6 +98,16 @@ class Model:
         changed at run time without recompiling.
     example:
         Optional default run (:class:`Example`).
+    constraints:
+        Second-order constraints Φ^A = 0 on the path (paper §3.2), written like the
+        Lagrangian (continuous, discretised by the same rule as h Σ w Φ(point), or
+        discrete); each window of the action sum gets its multipliers λ^k_A and the
+        augmented L_d + λ^k_A Φ^A_d is made stationary (eq. ``constrainedso``). Constrained
+        models are solved as whole trajectories (``solve_bvp``).
+    controls:
+        Continuous expressions evaluated at each window's quadrature point and returned
+        by ``solve_bvp`` (an optimal-control problem's u = EL(L)_a; see
+        :class:`symvi.control.OptimalControl`).
     """
 
     name: str
@@ -109,6 +119,8 @@ class Model:
     parameters: Mapping[Any, float] = field(default_factory=dict)
     example: Example | None = None
     description: str = ""
+    constraints: Sequence[Any] = ()
+    controls: Sequence[Any] = ()
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.isidentifier() \
@@ -124,6 +136,7 @@ class Model:
             self._validate_continuous()
         else:
             self._validate_discrete()
+        self._validate_extras()
         self._validate_example()
 
     # -- validation -------------------------------------------------------------------
@@ -202,6 +215,31 @@ class Model:
             + list(self.parameter_symbols)
         self._check_symbols(Ld, allowed, "discrete Lagrangian")
 
+    def _allowed_symbols(self) -> list[sp.Symbol]:
+        if self.lagrangian is not None:
+            symbols = list(self.groupoid.continuous_symbols(self.order))
+        else:
+            symbols = list(self.groupoid.discrete_symbols(self.order)) + [h]
+        return symbols + list(self.parameter_symbols)
+
+    def _validate_extras(self) -> None:
+        """Constraints and controls: scalars in the Lagrangian's symbols."""
+        for field_name in ("constraints", "controls"):
+            values = getattr(self, field_name)
+            if isinstance(values, (sp.Expr, str)) or not isinstance(values, (list, tuple, sp.MatrixBase)):
+                values = [values]
+            exprs = tuple(_scalar(v, f"{field_name[:-1]} {i}") for i, v in enumerate(values))
+            for i, e in enumerate(exprs):
+                self._check_symbols(e, self._allowed_symbols(), f"{field_name[:-1]} {i}")
+            object.__setattr__(self, field_name, exprs)
+        if self.constraints and self.order != 2:
+            raise ModelError(f"model {self.name!r}: constraints need a second-order model "
+                             f"(the multipliers of eq. constrainedso live on windows of two "
+                             f"elements); this one has order {self.order}")
+        if self.controls and self.lagrangian is None:
+            raise ModelError("controls are evaluated at the quadrature point of a continuous "
+                             "Lagrangian's discretisation; give `lagrangian`")
+
     def _validate_example(self) -> None:
         if self.example is None:
             return
@@ -215,5 +253,7 @@ class Model:
         """Canonical text of everything that determines the generated code."""
         body = self.lagrangian if self.lagrangian is not None else self.discrete_lagrangian
         params = ";".join(f"{s}={v!r}" for s, v in self.parameters)
+        extras = [sp.srepr(e) for e in self.constraints] + ["|"] \
+            + [sp.srepr(e) for e in self.controls]
         return "\n".join([self.name, self.groupoid.fingerprint(), str(self.discretisation),
-                          str(self.order), sp.srepr(body), params])
+                          str(self.order), sp.srepr(body), params] + extras)

@@ -35,7 +35,7 @@ from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 
 import symvi
-from symvi._runtime.bvp import _Group
+from symvi._runtime.bvp import _Problem
 from symvi.build import compile_model
 
 EPS = np.finfo(float).eps
@@ -43,7 +43,7 @@ I3 = np.eye(3)
 RETRACTIONS = ("cayley", "exp")
 #: Corrections larger than this recompute ξ from the configurations; smaller ones update
 #: ξ to first order (symvi/_runtime/bvp.py).
-RELOG = _Group.RELOG
+RELOG = _Problem.RELOG
 
 
 # ---------------------------------------------------------------------------------------
@@ -306,7 +306,7 @@ def test_newton_iterations_do_not_grow_with_N(cubic, retraction):
     rise by a few iterations at N = 10000, where recomputing ξ from the configurations
     (rounding ε/h, amplified by the 1/h² of a second-order residual) leaves a residual
     floor that the line search has to wait out until the corrections are small enough to
-    be applied to ξ directly (bvp._Group.RELOG)."""
+    be applied to ξ directly (bvp._Problem.RELOG)."""
     mod = cubic(retraction)
     iterations, lines = [], []
     for N in (100, 1000, 10000):

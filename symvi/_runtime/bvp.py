@@ -2,141 +2,134 @@
 
 The residual at node j involves nodes j−r … j+r, so the Jacobian is block-banded; C
 assembles it in LAPACK band layout and SciPy's ``solve_banded`` factorises it, so one
-iteration costs O(N). On the pair groupoid the unknowns are the nodes q_j themselves; on
-a matrix Lie group they are the configurations g_j, corrected multiplicatively
-(g_j ← g_j τ(η_j)), which keeps the product of the increments equal to g_0⁻¹g_N.
+iteration costs O(N). The unknowns are corrections η_j of the free nodes, applied as the
+node variation g → g·τ(η) (pair groupoid: q_j += η_j; matrix groups: g_j ← g_j τ(η_j),
+which keeps the product of the increments equal to g_0⁻¹g_N), and, with constraints, the
+multipliers λ^k of every window (paper §3.2, eq. ``constrainedso``).
 """
 from __future__ import annotations
 
 import numpy as np
 
 from . import arguments
+from .paths import Path, initial_path
 from .results import BVPResult, Status
 
 
-class _Pair:
-    """Unknowns: the interior nodes q_r … q_{N−r} (state: all nodes)."""
+class _Problem:
+    """Newton's view of a path: residuals, banded Jacobian and updates, all in C.
 
-    approximate_updates = False
-
-    def __init__(self, model, p, h):
-        self.model, self.p, self.h, self.r = model, p, h, model.order
-
-    def assemble(self, nodes, with_jacobian: bool):
-        return _assemble(self.model, self.model.lib.symvi_bvp_assemble, nodes, nodes.shape[0],
-                         nodes.shape[0] - 2 * self.r, self.p, self.h, with_jacobian)
-
-    def moved(self, nodes, delta, alpha, exact=True):
-        trial = nodes.copy()
-        trial[self.r:-self.r] += alpha * delta.reshape(-1, self.model.n)
-        return trial
-
-    def size(self, nodes) -> float:
-        return float(np.abs(nodes).max())
-
-    def magnitudes(self, nodes) -> np.ndarray:
-        return np.abs(nodes[self.r:-self.r]).reshape(-1)
-
-
-class _Group:
-    """Unknowns: corrections η_j of the free configurations (state: (g, ξ)).
-
-    Corrections above ``RELOG`` recompute ξ from the configurations (exactly on the group);
-    smaller ones move ξ by its first-order change, exact to O(|η|²) ≤ 1e-14, and so avoid
-    rounding ξ to ε/h, which a second-order residual would amplify by 1/h². ``exact=False``
-    asks for the first-order change whatever the size (the line search's second try).
+    Corrections above ``RELOG`` recompute group fibres ξ from the configurations (exactly
+    on the group); smaller ones move ξ by its first-order change, exact to O(|η|²) ≤ 1e-14,
+    and so avoid rounding ξ to ε/h, which a second-order residual would amplify by 1/h².
+    ``exact=False`` asks for the first-order change whatever the size (the line search's
+    second try).
     """
 
     RELOG = 1e-7
-    approximate_updates = True
 
     def __init__(self, model, p, h):
-        self.model, self.p, self.h, self.r = model, p, h, model.order
+        self.model, self.p, self.h = model, p, h
+        self.approximate_updates = bool(model.matrix_dims)
 
-    def assemble(self, state, with_jacobian: bool):
-        xi = state[1]
-        return _assemble(self.model, self.model.lib.symvi_group_bvp_assemble, xi, xi.shape[0],
-                         xi.shape[0] + 1 - 2 * self.r, self.p, self.h, with_jacobian)
+    def assemble(self, path: Path, with_jacobian: bool):
+        m, n_nodes = self.model, path.x.shape[0]
+        unknown = int(m.lib.symvi_bvp_unknowns(n_nodes))
+        bw = int(m.lib.symvi_bvp_bandwidth())
+        res = np.zeros(unknown)
+        ab = np.zeros((2 * bw + 1, unknown)) if with_jacobian else None
+        code = m.lib.symvi_bvp_assemble(m.ptr(path.x), m.ptr(path.f), m.ptr(path.lam), n_nodes,
+                                        m.ptr(self.p), self.h, m.ptr(res),
+                                        m.ptr(ab) if with_jacobian else m.ffi.NULL)
+        return res, ab, bw, code == 0
 
-    def moved(self, state, delta, alpha, exact=True):
-        m = self.model
-        g, xi = state[0].copy(), state[1].copy()
+    def moved(self, path: Path, delta, alpha, exact=True):
+        m, trial = self.model, path.copy()
         failed = m.ffi.new("long *")
-        relog = int(exact and alpha * float(np.abs(delta).max(initial=0.0)) > self.RELOG)
-        code = m.lib.symvi_group_bvp_update(m.ptr(g), m.ptr(xi), m.ptr(delta), alpha,
-                                            xi.shape[0], m.ptr(self.p), self.h, relog, failed)
-        return (g, xi) if code == 0 else None
+        relog = int(self.approximate_updates and exact
+                    and alpha * float(np.abs(delta).max(initial=0.0)) > self.RELOG)
+        code = m.lib.symvi_bvp_update(m.ptr(trial.x), m.ptr(trial.g), m.ptr(trial.f),
+                                      m.ptr(trial.lam), m.ptr(delta), alpha, path.x.shape[0],
+                                      m.ptr(self.p), self.h, relog, failed)
+        return trial if code == 0 else None
 
-    def size(self, state) -> float:
-        return 1.0
+    def size(self, path: Path) -> float:
+        """Scale of the unknowns for the relative step tolerance."""
+        floor = 1.0 if self.model.matrix_dims else 0.0
+        return max(floor, float(np.abs(path.x).max(initial=0.0)),
+                   float(np.abs(path.lam).max(initial=0.0)))
 
-    def magnitudes(self, state) -> np.ndarray:
-        return np.ones((state[1].shape[0] + 1 - 2 * self.r) * self.model.n)
-
-
-def _assemble(model, function, data, count: int, free_nodes: int, p, h, with_jacobian: bool):
-    """Residuals at the free nodes and (optionally) their banded Jacobian, from C.
-
-    ``function`` is the C assembler, called on ``data`` (nodes, resp. increments) and
-    their ``count``; the Jacobian comes in LAPACK band layout with ``bw`` sub- and
-    super-diagonals.
-    """
-    unknown = free_nodes * model.n
-    bw = int(model.lib.symvi_bvp_bandwidth())
-    res = np.zeros(unknown)
-    ab = np.zeros((2 * bw + 1, unknown)) if with_jacobian else None
-    code = function(model.ptr(data), count, model.ptr(p), h, model.ptr(res),
-                    model.ptr(ab) if with_jacobian else model.ffi.NULL)
-    return res, ab, bw, code == 0
+    def magnitudes(self, path: Path) -> np.ndarray:
+        """Magnitude of every unknown, in the block layout of the C assembler."""
+        m, r, s = self.model, self.model.order, self.model.constraints
+        t0 = r - 1 if s else r
+        blocks = np.arange(t0, path.x.shape[0] - t0)
+        if not m.matrix_dims and m.m == m.n:
+            eta = np.abs(path.x[blocks])
+        else:
+            top = np.abs(path.x[blocks]).max(axis=1, initial=1.0)
+            eta = np.repeat(top[:, None], m.n, axis=1)
+        lam = np.abs(path.lam[blocks - 1]) if s else np.zeros((len(blocks), 0))
+        return np.concatenate([eta, lam], axis=1).reshape(-1)
 
 
 def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=None,
               maxiter: int = 50, xtol: float = 1e-12, ftol: float = 0.0,
               raise_on_failure: bool = False) -> BVPResult:
-    """Solve for the free nodes with the first and last r nodes fixed (r the order).
+    """Solve for the free nodes (and multipliers) with the first and last r nodes fixed.
 
     Parameters
     ----------
-    start, end : the fixed nodes. Pair groupoid: (r, n) arrays q_0 … q_{r−1} and
-        q_{N−r+1} … q_N. Matrix Lie group: (r, d, d) configurations g_0 … g_{r−1} and
-        g_{N−r+1} … g_N.
+    start, end : the fixed nodes 0 … r−1 and N−r+1 … N (r the order). Pair groupoid:
+        (r, n) arrays of nodes q. Matrix Lie group: (r, d, d) configurations. Groupoids
+        with both (action groupoids, products): ``(x, g)``, base points (r, m) and
+        configurations (r, d, d) — a tuple of such arrays with several group factors.
+        On an action groupoid the base points must follow the configurations.
     n_steps : N, the number of elements (N + 1 nodes).
-    guess : the free nodes q_r … q_{N−r} ((N + 1 − 2r, n)), resp. configurations
-        ((N + 1 − 2r, d, d)); default: interpolation between the fixed ends (linear, resp.
-        g_{r−1} τ(s·τ⁻¹(g_{r−1}⁻¹ g_{N−r+1}))).
+    guess : the free nodes r … N−r in the same layout; default: the chord between the
+        fixed ends (linear, resp. g_{r−1} τ(s·τ⁻¹(g_{r−1}⁻¹ g_{N−r+1})), base points
+        moved along). Multipliers start at zero.
     maxiter, xtol, ftol : Newton stops when the update ‖Δ‖∞ ≤ xtol·(1 + size) or the
         residual ‖R‖∞ ≤ ftol. A backtracking line search on ‖R‖₂ globalises it.
+    raise_on_failure : raise :class:`NewtonError` (carrying the failed result and its
+        iteration history) instead of returning a failed result.
     """
     info = model.info
-    if not (info["bvp"] or info.get("group_bvp")):
-        raise ValueError(f"model {model.name!r}: whole-trajectory solves are available on the "
-                         f"pair groupoid and on matrix Lie groups, not on kind {info['kind']!r}")
+    if not info["whole_trajectory"]:
+        raise ValueError(f"model {model.name!r}: no whole-trajectory solve on kind "
+                         f"{info['kind']!r}")
     r = model.order
     N = arguments.count(n_steps, "n_steps", 2 * r)
     h, p = arguments.step_size(h), model.params(params)
     xtol, ftol = arguments.tolerance(xtol, "xtol"), arguments.tolerance(ftol, "ftol")
     maxiter = arguments.count(maxiter, "maxiter", 1)
-    if info["bvp"]:
-        problem, state = _Pair(model, p, h), _pair_state(model, start, end, N, guess)
-    else:
-        problem, state = _Group(model, p, h), _group_state(model, start, end, N, guess, p, h)
-        if isinstance(state, BVPResult):
-            return state.raise_for_status() if raise_on_failure else state
-    state, norms, steps, status, message = _newton(problem, state, maxiter, xtol, ftol)
+    path = initial_path(model, start, end, N, guess, p, h)
+    if isinstance(path, BVPResult):
+        return path.raise_for_status() if raise_on_failure else path
+    path, norms, steps, status, message = _newton(_Problem(model, p, h), path, maxiter, xtol,
+                                                  ftol)
     if status == Status.SUCCESS:
         message = (f"converged in {len(steps)} Newton iterations, residual norm "
                    f"{norms[-1]:.3e}{message}")
     else:
         message += f"; residual norm {norms[-1]:.3e}"
-    common = dict(t=h * np.arange(N + 1), iterations=len(steps),
-                  residual_norms=np.array(norms), step_norms=np.array(steps), status=status,
-                  message=message)
-    if info["bvp"]:
-        result = BVPResult(q=state, **common)
-    else:
-        d = model.matrix_dims[0]
-        result = BVPResult(g=state[0].reshape(-1, d, d), f=state[1], **common)
+    result = _result(model, path, p, h, dict(
+        t=h * np.arange(N + 1), iterations=len(steps), residual_norms=np.array(norms),
+        step_norms=np.array(steps), status=status, message=message))
     return result.raise_for_status() if raise_on_failure else result
+
+
+def _result(model, path: Path, p, h, common: dict) -> BVPResult:
+    r = model.order
+    windows = path.f.shape[0] - r + 1
+    cost = float(model.along_vector("lagrangian", path.x, path.f, h, p).sum())
+    controls = (model.along_vector("controls", path.x, path.f, h, p)
+                if model.info["controls"] else None)
+    return BVPResult(x=path.x if model.m else None, f=path.f,
+                     g=model.configurations(path.g) if model.matrix_dims else None,
+                     multipliers=path.lam if model.constraints else None,
+                     controls=controls, cost=cost if windows > 0 else 0.0,
+                     kind=model.info["kind"], **common)
 
 
 def _newton(problem, state, maxiter: int, xtol: float, ftol: float):
@@ -219,84 +212,3 @@ def _line_search(problem, state, delta, res, min_alpha: float = 2.0**-12):
                 return trial, alpha * float(np.abs(delta).max(initial=0.0))
         alpha /= 2
     return state, None
-
-
-def _pair_state(model, start, end, N: int, guess) -> np.ndarray:
-    r, n = model.order, model.n
-    start = arguments.finite_array(start, (r, n), f"start nodes q_0..q_{r - 1}")
-    end = arguments.finite_array(end, (r, n), f"end nodes q_{N - r + 1}..q_{N}")
-    count = N + 1 - 2 * r
-    if guess is None:
-        s = np.linspace(0.0, 1.0, count + 2)[1:-1, None]
-        interior = (1 - s) * start[-1] + s * end[0]
-    else:
-        interior = arguments.finite_array(guess, (count, n), "guess of the interior nodes")
-    return np.concatenate([start, interior, end])
-
-
-def _group_state(model, start, end, N: int, guess, p, h):
-    """(g, ξ) from the fixed and guessed configurations, or a failed BVPResult."""
-    r, d = model.order, model.matrix_dims[0]
-    start = arguments.finite_array(start, (r, d, d), f"start configurations g_0..g_{r - 1}")
-    end = arguments.finite_array(end, (r, d, d), f"end configurations g_{N - r + 1}..g_{N}")
-    count = N + 1 - 2 * r
-    if guess is None:
-        chord = _increments(model, np.stack([start[-1], end[0]]), p, 1.0,
-                            lambda k: f"the default guess (pass guess=...): g_{r - 1}⁻¹ "
-                                      f"g_{N - r + 1}, between the fixed ends,")
-        if isinstance(chord, BVPResult):
-            return chord
-        s = np.linspace(0.0, 1.0, count + 2)[1:-1]
-        interior = np.stack([_retract(model, start[-1], chord[0], a) for a in s]) \
-            if count else np.zeros((0, d, d))
-    else:
-        interior = arguments.finite_array(guess, (count, d, d), "guess of the free configurations")
-    g = np.ascontiguousarray(np.concatenate([start, interior, end]))
-    xi = _increments(model, g, p, h, lambda k: f"the initial path: w_{k} = g_{k}⁻¹ g_{k + 1}")
-    return xi if isinstance(xi, BVPResult) else (g.reshape(N + 1, -1), xi)
-
-
-def _retract(model, g, eta, alpha) -> np.ndarray:
-    out = np.zeros_like(g)
-    model.lib.symvi_group_retract(model.ptr(np.ascontiguousarray(g)),
-                                  model.ptr(np.ascontiguousarray(eta)), alpha, model.ptr(out))
-    return out
-
-
-def increments(model, g, h: float, params=None) -> np.ndarray:
-    """ξ_k = τ⁻¹(g_k⁻¹ g_{k+1})/h of a path of configurations g (K, d, d).
-
-    Raises ValueError naming the element when an increment is outside the retraction's
-    chart (Cayley: a half-turn; exp: a rotation angle ≥ π).
-    """
-    if not model.info.get("group_bvp"):
-        raise ValueError(f"model {model.name!r} is not on a matrix Lie group")
-    d, shape = model.matrix_dims[0], np.shape(g)
-    if len(shape) != 3 or shape[0] < 2:
-        raise ValueError(f"configurations g must have shape (K ≥ 2, {d}, {d}), got {shape}")
-    g = arguments.finite_array(g, (shape[0], d, d), "configurations g")
-    out = _increments(model, g, model.params(params), arguments.step_size(h),
-                      lambda k: f"w_{k} = g_{k}⁻¹ g_{k + 1}")
-    if isinstance(out, BVPResult):
-        raise ValueError(out.message)
-    return out
-
-
-def _increments(model, g, p, h, describe):
-    """ξ_k = τ⁻¹(g_k⁻¹ g_{k+1})/h in C, or a failed BVPResult naming the element."""
-    g = np.ascontiguousarray(g, dtype=np.float64)
-    xi = np.zeros((g.shape[0] - 1, model.n))
-    failed = model.ffi.new("long *")
-    code = model.lib.symvi_group_increments(model.ptr(g), g.shape[0], model.ptr(p), h,
-                                            model.ptr(xi), failed)
-    if code == 0:
-        return xi
-    status = Status(code)
-    k = int(failed[0])
-    reason = {Status.OUTSIDE_CHART: "is outside the retraction's chart (Cayley: a half-turn, "
-                                    "I + W singular; exp: rotation angle ≥ π)",
-              Status.SINGULAR_JACOBIAN: "has a singular configuration"}.get(
-        status, "could not be converted to an increment")
-    message = f"the increment of {describe(k)} {reason}"
-    return BVPResult(t=np.zeros(0), iterations=0, residual_norms=np.zeros(0),
-                     step_norms=np.zeros(0), status=status, message=message)

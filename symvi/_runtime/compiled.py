@@ -6,7 +6,8 @@ from typing import Mapping
 import numpy as np
 
 from . import arguments
-from .bvp import increments, solve_bvp
+from .bvp import solve_bvp
+from .paths import increments
 from .stepping import integrate
 
 
@@ -24,6 +25,8 @@ class CompiledModel:
         self.order: int = info["order"]
         self.m: int = info["source_dim"]
         self.n: int = info["fibre_dim"]
+        #: s, the constraints per window (multipliers λ^k ∈ R^s).
+        self.constraints: int = info.get("constraints", 0)
         self.parameter_names: tuple[str, ...] = tuple(info["parameters"])
         self.parameter_defaults: tuple[float, ...] = tuple(info["defaults"])
 
@@ -65,7 +68,12 @@ class CompiledModel:
 
     def along(self, kernel: str, x: np.ndarray, f: np.ndarray, h: float, params=None,
               windows: int | None = None) -> np.ndarray:
-        """Evaluate a single-output kernel on every window of consecutive elements."""
+        """Evaluate a kernel's first output on every window of consecutive elements."""
+        return self.along_vector(kernel, x, f, h, self.params(params), windows)
+
+    def along_vector(self, kernel: str, x: np.ndarray, f: np.ndarray, h: float,
+                     p: np.ndarray, windows: int | None = None) -> np.ndarray:
+        """:meth:`along` with the parameter vector ``p`` already assembled."""
         spec = self.info["kernels"][kernel]
         width = (spec["nz"] - self.m) // self.n
         available = f.shape[0] - width + 1
@@ -75,8 +83,8 @@ class CompiledModel:
             x = np.ascontiguousarray(x, dtype=np.float64)
             f = np.ascontiguousarray(f, dtype=np.float64)
             getattr(self.lib, f"symvi_{kernel}_path")(self.ptr(x), self.ptr(f), windows,
-                                                      self.ptr(self.params(params)),
-                                                      arguments.step_size(h), self.ptr(out))
+                                                      self.ptr(p), arguments.step_size(h),
+                                                      self.ptr(out))
         return out
 
     def momenta(self, x: np.ndarray, f: np.ndarray, h: float, params=None) -> np.ndarray:
@@ -94,6 +102,9 @@ class CompiledModel:
 
     def integrate(self, initial, n_steps: int, h: float, params=None, **options):
         """Step the discrete Euler–Lagrange equations; see :func:`stepping.integrate`."""
+        if self.constraints:
+            raise ValueError(f"model {self.name!r} has constraints with multipliers; it is "
+                             f"solved as a whole trajectory: use solve_bvp")
         return integrate(self, initial, n_steps, h, params, **options)
 
     def solve_bvp(self, start, end, n_steps: int, h: float, params=None, **options):

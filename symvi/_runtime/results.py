@@ -87,13 +87,21 @@ class BVPResult(_Checkable):
     Attributes
     ----------
     t : (N+1,) times of the nodes.
-    q : (N+1, n) nodes, boundary nodes included (pair groupoid), else None.
-    g : (N+1, d, d) configurations, boundary ones included (matrix Lie group), else None.
-    f : (N, n) increments ξ_k = τ⁻¹(g_k⁻¹g_{k+1})/h (matrix Lie group), else None.
+    x : (N+1, m) base points of the nodes (pair groupoid: the nodes q; also ``q``), None
+        on a Lie group.
+    g : (N+1, d, d) configurations of the matrix-group factor (a tuple of such arrays with
+        several factors), boundary ones included, else None.
+    f : (N, n) fibres of the elements (Lie groups: ξ_k = τ⁻¹(g_k⁻¹g_{k+1})/h; pair
+        factors: the next node).
+    multipliers : (N−r+1, s) multipliers λ^k of the windows (constrained models), else None.
+    controls : (N−r+1, c) controls u_k at each window's quadrature point (optimal-control
+        problems: u = EL(L)_a of the discrete path), else None.
+    cost : Σ_k L_d over the windows — the discrete cost J_d of an optimal-control problem,
+        the action sum otherwise.
     iterations : Newton iterations taken.
     residual_norms : max-norm of the residual before each iteration and at the end.
     step_norms : max-norm of each Newton update actually taken (after line search).
-    status, success, message : outcome.
+    status, success, message : outcome; a failed solve keeps the last iterate.
     """
 
     t: np.ndarray
@@ -102,10 +110,19 @@ class BVPResult(_Checkable):
     step_norms: np.ndarray
     status: Status
     message: str
-    q: np.ndarray | None = None
-    g: np.ndarray | None = None
+    x: np.ndarray | None = None
+    g: np.ndarray | tuple | None = None
     f: np.ndarray | None = None
+    multipliers: np.ndarray | None = None
+    controls: np.ndarray | None = None
+    cost: float | None = None
+    kind: str = ""
 
     @property
     def success(self) -> bool:
         return self.status == Status.SUCCESS
+
+    @property
+    def q(self) -> np.ndarray | None:
+        """Alias of ``x`` (the nodes of a pair-groupoid path)."""
+        return self.x

@@ -19,7 +19,7 @@ import numpy as np
 import sympy as sp
 
 from ..errors import ModelError
-from .base import Groupoid, _shape
+from .base import Algebroid, Groupoid, _shape
 from .lie import MatrixLieGroup, _symbol_names
 
 Action = Callable[[sp.Matrix, sp.Matrix], Sequence[sp.Expr]]
@@ -43,6 +43,7 @@ class ActionGroupoid(Groupoid):
     """
 
     kind = "action"
+    whole_trajectory = True
 
     def __init__(self, group: MatrixLieGroup, base: str | Sequence[str], action: Action,
                  label: str | None = None):
@@ -147,6 +148,15 @@ class ActionGroupoid(Groupoid):
     def predictor(self, xs, fs):
         return self.group.predictor(xs, fs)
 
+    def algebroid(self) -> Algebroid:
+        """The action algebroid Q×𝔥: anchor the infinitesimal action, structure
+        functions the group's constants (paper §3.3.5)."""
+        return Algebroid(self.q, self.xi, self.xidot, self._generators,
+                         self.group.structure_functions())
+
+    def move(self, x, eta):
+        return tuple(self.act(x, self.group.tau(eta)))
+
     def continuous_symbols(self, order):
         return self.q + self.group.continuous_symbols(order)
 
@@ -190,7 +200,9 @@ class ActionGroupoid(Groupoid):
 
     def c_context(self) -> dict:
         return {"configuration_dim": self.group.matrix_dim ** 2,
-                "groups": [self.group.group_context(0)]}
+                "groups": [self.group.group_context(0)],
+                "factors": [{"kind": "group", "group": 0, "f_offset": 0,
+                             "dim": self.fibre_dim}]}
 
     def coefficient_functions(self) -> list:
         return self.group.coefficient_functions()

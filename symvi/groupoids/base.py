@@ -19,6 +19,7 @@ built from these by :mod:`symvi.derive`, so a new groupoid is a new subclass onl
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
@@ -31,6 +32,39 @@ def _shape(value, expected: tuple[int, ...], what: str) -> None:
     shape = np.shape(value)
     if shape != expected:
         raise ModelError(f"{what} has shape {shape}, expected {expected}")
+
+
+@dataclass(frozen=True)
+class Algebroid:
+    """The Lie algebroid AG of a groupoid in the coordinates of its basis sections e_α.
+
+    Base coordinates ``q`` (m), fibre coordinates ``y`` (n) and their rates ``ydot``
+    (the continuous symbols of the groupoid's Lagrangians), the anchor ``anchor``
+    (m×n: q̇ = ρ(q) y) and the structure functions, ``structure[γ][α, β]`` = C^γ_{αβ}(q)
+    with ⟦e_α, e_β⟧ = C^γ_{αβ} e_γ (paper §3.3.1, Appendix C).
+    """
+
+    q: tuple[sp.Symbol, ...]
+    y: tuple[sp.Symbol, ...]
+    ydot: tuple[sp.Symbol, ...]
+    anchor: sp.Matrix
+    structure: tuple[sp.Matrix, ...]
+
+
+def block_algebroid(parts: Sequence[Algebroid]) -> Algebroid:
+    """The algebroid of a product: anchors and structure functions blockwise."""
+    anchor = sp.diag(*[a.anchor for a in parts]) if parts else sp.zeros(0, 0)
+    n = sum(len(a.y) for a in parts)
+    structure, offset = [], 0
+    for a in parts:
+        k = len(a.y)
+        for C in a.structure:
+            M = sp.zeros(n, n)
+            M[offset:offset + k, offset:offset + k] = C
+            structure.append(M)
+        offset += k
+    return Algebroid(tuple(s for a in parts for s in a.q), tuple(s for a in parts for s in a.y),
+                     tuple(s for a in parts for s in a.ydot), anchor, tuple(structure))
 
 
 class Groupoid(ABC):
@@ -120,20 +154,31 @@ class Groupoid(ABC):
         _shape(first, (self.source_dim,), "initial base point")
         _shape(fibres, (2 * order - 1, self.fibre_dim), "initial fibre parts")
 
+    def algebroid(self) -> Algebroid:
+        """The Lie algebroid AG in coordinates (optimal control, paper §3.3)."""
+        raise NotImplementedError(f"{self!r} does not describe its Lie algebroid")
+
+    def move(self, x: Sequence[sp.Expr], eta: Sequence[sp.Expr]) -> tuple[sp.Expr, ...]:
+        """Base point of a node after the variation g → g·τ(η) of the elements meeting
+        there (the whole-trajectory update; pair groupoid: x + η)."""
+        raise NotImplementedError(f"{self!r} has no whole-trajectory update")
+
     def c_context(self) -> dict:
         """Numbers the C templates need beyond the kernels.
 
         ``configuration_dim``: numbers of the configuration reconstructed along a path
         (Σ d² over matrix-group factors); ``groups``: one dict per matrix-group factor
-        (see :meth:`MatrixLieGroup.group_context`).
+        (see :meth:`MatrixLieGroup.group_context`); ``factors``: how the fibre of an
+        element follows from its two nodes, per factor — ``pair`` (a copy of the target
+        node's coordinates) or ``group`` (τ⁻¹(g_k⁻¹g_{k+1})/h of matrix group ``group``).
         """
-        return {"configuration_dim": 0, "groups": []}
+        return {"configuration_dim": 0, "groups": [], "factors": []}
 
     def coefficient_functions(self) -> list:
         """Analytic coefficient functions the C reconstruction uses (exponential maps)."""
         return []
 
-    #: The unknowns of a whole-trajectory solve: "nodes" (the base points themselves, pair
-    #: groupoid), "configurations" (matrix Lie groups, corrected multiplicatively; DESIGN.md
-    #: §4) or None (not supported; the stencil Jacobian is then not emitted).
-    whole_trajectory: str | None = None
+    #: Whether the whole-trajectory solve (DESIGN.md §4) is available: the nodes are
+    #: the unknowns, moved by :meth:`move` and, on matrix-group factors, corrected
+    #: multiplicatively.
+    whole_trajectory: bool = False

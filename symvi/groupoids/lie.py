@@ -26,7 +26,7 @@ import sympy as sp
 from ..errors import ModelError
 from . import analytic
 from . import retraction as _retraction
-from .base import Groupoid, _shape
+from .base import Algebroid, Groupoid, _shape
 
 
 def _symbol_names(names, n: int, default: str) -> tuple[str, ...]:
@@ -58,7 +58,7 @@ class MatrixLieGroup(Groupoid):
     """
 
     kind = "lie"
-    whole_trajectory = "configurations"
+    whole_trajectory = True
 
     def __init__(self, basis: Sequence, names=None, label: str = "G",
                  retraction: str = "cayley"):
@@ -132,6 +132,23 @@ class MatrixLieGroup(Groupoid):
     def dtau_inv(self, x) -> sp.Matrix:
         """Matrix of the retraction's right-trivialised dτ⁻¹_X, X = Σ x_a E_a."""
         return self.retraction.inverse_derivative(x)
+
+    def structure_functions(self) -> tuple[sp.Matrix, ...]:
+        """C^γ_{αβ} of [E_α, E_β] = C^γ_{αβ} E_γ, as ``result[γ][α, β]``."""
+        n = self.fibre_dim
+        out = [sp.zeros(n, n) for _ in range(n)]
+        for (a, b), c in self.structure_constants.items():
+            for g in range(n):
+                out[g][a, b], out[g][b, a] = c[g], -c[g]
+        return tuple(out)
+
+    def algebroid(self) -> Algebroid:
+        """The Lie algebra over a point: no base, zero anchor (paper §3.3.4)."""
+        return Algebroid((), self.xi, self.xidot, sp.zeros(0, self.fibre_dim),
+                         self.structure_functions())
+
+    def move(self, x, eta):
+        return ()
 
     def tau(self, x) -> sp.Matrix:
         """τ(X) as a matrix."""
@@ -207,7 +224,9 @@ class MatrixLieGroup(Groupoid):
         return self.retraction.coefficient_functions()
 
     def c_context(self) -> dict:
-        return {"configuration_dim": self.matrix_dim ** 2, "groups": [self.group_context()]}
+        return {"configuration_dim": self.matrix_dim ** 2, "groups": [self.group_context()],
+                "factors": [{"kind": "group", "group": 0, "f_offset": 0,
+                             "dim": self.fibre_dim}]}
 
 
 def _hat3(v):

@@ -6,7 +6,7 @@ from typing import Sequence
 import sympy as sp
 
 from ..errors import ModelError
-from .base import Groupoid, _shape
+from .base import Algebroid, Groupoid, _shape
 
 
 def _names(coordinates: str | Sequence[str]) -> tuple[str, ...]:
@@ -41,7 +41,7 @@ class PairGroupoid(Groupoid):
     """
 
     kind = "pair"
-    whole_trajectory = "nodes"
+    whole_trajectory = True
 
     def __init__(self, coordinates: str | Sequence[str]):
         self.names = _names(coordinates)
@@ -115,6 +115,19 @@ class PairGroupoid(Groupoid):
     def left(self, x, f, h):
         n = self.fibre_dim
         return sp.Matrix.vstack(sp.eye(n), sp.zeros(n, n))
+
+    def algebroid(self) -> Algebroid:
+        """TQ: y = q̇, anchor the identity, no structure functions."""
+        n = self.fibre_dim
+        return Algebroid(self.q, self.qdot, self.qddot, sp.eye(n), (sp.zeros(n, n),) * n)
+
+    def move(self, x, eta):
+        return tuple(a + b for a, b in zip(x, eta))
+
+    def c_context(self) -> dict:
+        n = self.fibre_dim
+        return {"configuration_dim": 0, "groups": [],
+                "factors": [{"kind": "pair", "x_offset": 0, "f_offset": 0, "dim": n}]}
 
     def predictor(self, xs, fs):
         # Linear extrapolation of the nodes: q_{k+1} ≈ 2 q_k − q_{k−1}.

@@ -11,7 +11,7 @@ import itertools
 import sympy as sp
 
 from ..errors import ModelError
-from .base import Groupoid, _shape
+from .base import Algebroid, Groupoid, _shape, block_algebroid
 
 
 class ProductGroupoid(Groupoid):
@@ -78,6 +78,18 @@ class ProductGroupoid(Groupoid):
     def left(self, x, f, h):
         return self._blocks("left", x, f, h)
 
+    @property
+    def whole_trajectory(self) -> bool:
+        return all(f.whole_trajectory for f in self.factors)
+
+    def algebroid(self) -> Algebroid:
+        return block_algebroid([f.algebroid() for f in self.factors])
+
+    def move(self, x, eta):
+        return tuple(v for factor, xi, ei in zip(self.factors, self._split(x, self._m),
+                                                 self._split(eta, self._n))
+                     for v in factor.move(xi, ei))
+
     def predictor(self, xs, fs):
         return tuple(v for factor, (fx, ff) in zip(self.factors, self._factor_slots(xs, fs))
                      for v in factor.predictor(fx, ff))
@@ -128,13 +140,22 @@ class ProductGroupoid(Groupoid):
         return "product:" + "|".join(f.fingerprint() for f in self.factors)
 
     def c_context(self) -> dict:
-        groups, offset, size = [], 0, 0
+        groups, factors, offset, x_offset, size = [], [], 0, 0, 0
         for factor in self.factors:
-            for G in factor.c_context()["groups"]:
+            context = factor.c_context()
+            for F in context["factors"]:
+                moved = {"f_offset": F["f_offset"] + offset}
+                if F["kind"] == "group":
+                    moved["group"] = F["group"] + len(groups)
+                else:
+                    moved["x_offset"] = F["x_offset"] + x_offset
+                factors.append(F | moved)
+            for G in context["groups"]:
                 groups.append(G | {"offset": G["offset"] + offset})
                 size += G["matrix_dim"] ** 2
             offset += factor.fibre_dim
-        return {"configuration_dim": size, "groups": groups}
+            x_offset += factor.source_dim
+        return {"configuration_dim": size, "groups": groups, "factors": factors}
 
     def coefficient_functions(self) -> list:
         return [c for f in self.factors for c in f.coefficient_functions()]

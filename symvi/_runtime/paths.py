@@ -1,0 +1,156 @@
+"""Discrete paths as nodes: boundary data, initial guesses and element fibres.
+
+A node is its base point x (m numbers) and the configurations g of the matrix-group
+factors (d×d each, flattened and concatenated). Elements follow from consecutive nodes in
+C (``symvi_path_fibres``): a pair factor's fibre is the next node's coordinates, a group
+factor's is ξ = τ⁻¹(g_k⁻¹g_{k+1})/h. On an action groupoid the base points must follow
+the configurations, x_{k+1} = φ(x_k, g_k⁻¹g_{k+1}); :func:`check_consistent` says where
+they do not.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from . import arguments
+from .results import BVPResult, Status
+
+
+@dataclass(frozen=True)
+class Path:
+    """Nodes (x, g), element fibres f and window multipliers lam of a discrete path."""
+
+    x: np.ndarray    # (nodes, m)
+    g: np.ndarray    # (nodes, Σ d²)
+    f: np.ndarray    # (nodes − 1, n)
+    lam: np.ndarray  # (windows, s)
+
+    def copy(self) -> "Path":
+        return replace(self, x=self.x.copy(), g=self.g.copy(), f=self.f.copy(),
+                       lam=self.lam.copy())
+
+
+def _configurations(model, value, count: int, what: str) -> np.ndarray:
+    """(count, Σ d²) from one (count, d, d) array per group factor."""
+    dims = model.matrix_dims
+    blocks = [value] if len(dims) == 1 else list(value)
+    if len(blocks) != len(dims):
+        raise ValueError(f"{what} need {len(dims)} arrays, one per matrix-group factor")
+    return np.concatenate([arguments.finite_array(b, (count, d, d), what).reshape(count, -1)
+                           for b, d in zip(blocks, dims)], axis=1)
+
+
+def nodes(model, value, count: int, what: str) -> tuple[np.ndarray, np.ndarray]:
+    """Parse ``count`` nodes: base points (count, m) on a pair groupoid, configurations
+    (count, d, d) on a Lie group, ``(x, g)`` when there are both."""
+    m, dims = model.m, model.matrix_dims
+    if not dims:
+        return arguments.finite_array(value, (count, m), f"{what} nodes"), np.zeros((count, 0))
+    if m == 0:
+        return np.zeros((count, 0)), _configurations(model, value, count, f"{what} configurations")
+    try:
+        x, g = value
+    except (TypeError, ValueError):
+        raise ValueError(f"{what} must be (x, g): base points ({count}, {m}) and "
+                         f"configurations ({count}, d, d)") from None
+    return (arguments.finite_array(x, (count, m), f"{what} base points"),
+            _configurations(model, g, count, f"{what} configurations"))
+
+
+def _failure(message: str, status: Status) -> BVPResult:
+    return BVPResult(t=np.zeros(0), iterations=0, residual_norms=np.zeros(0),
+                     step_norms=np.zeros(0), status=status, message=message)
+
+
+REASONS = {Status.OUTSIDE_CHART: "is outside the retraction's chart (Cayley: a half-turn, "
+                                 "I + W singular; exp: rotation angle ≥ π)",
+           Status.SINGULAR_JACOBIAN: "has a singular configuration"}
+
+
+def fibres(model, x, g, p, h, describe, f=None):
+    """Element fibres of the nodes (x, g) in C, or a failed BVPResult naming the element."""
+    f = np.zeros((x.shape[0] - 1, model.n)) if f is None else f
+    failed = model.ffi.new("long *")
+    code = model.lib.symvi_path_fibres(model.ptr(x), model.ptr(g), model.ptr(f), x.shape[0],
+                                       model.ptr(p), h, 0, failed)
+    if code == 0:
+        return f
+    status = Status(code)
+    reason = REASONS.get(status, "could not be converted to an increment")
+    return _failure(f"the increment of {describe(int(failed[0]))} {reason}", status)
+
+
+def interpolate(model, x, g, a: int, b: int, p, describe):
+    """Fill nodes a < j < b on the chord from node a to node b (in place), or fail."""
+    code = model.lib.symvi_path_interpolate(model.ptr(x), model.ptr(g), a, b, model.ptr(p))
+    if code == 0:
+        return None
+    status = Status(code)
+    return _failure(f"the increment of {describe} {REASONS.get(status, 'failed')}", status)
+
+
+def check_consistent(model, x, f, p, h, what: str, tol: float = 1e-9) -> None:
+    """Raise ValueError when a base point is not the target of the element before it."""
+    if model.m == 0:
+        return
+    where = model.ffi.new("long *")
+    gap = model.lib.symvi_path_mismatch(model.ptr(x), model.ptr(f), x.shape[0], model.ptr(p),
+                                        h, where)
+    scale = 1.0 + float(np.abs(x).max(initial=0.0))
+    if not gap <= tol * scale:
+        k = int(where[0])
+        raise ValueError(
+            f"inconsistent {what}: the base point of node {k + 1} differs by {gap:.3e} from "
+            f"the target β of element {k} (on an action groupoid x_{k + 1} must be "
+            f"φ(x_{k}, g_{k}⁻¹ g_{k + 1}))")
+
+
+def initial_path(model, start, end, N: int, guess, p, h):
+    """The Path the Newton iteration starts from, or a failed BVPResult.
+
+    Fixed nodes 0…r−1 and N−r+1…N; free nodes from ``guess`` or, by default, on the chord
+    between nodes r−1 and N−r+1 (linear on a pair groupoid, g_{r−1} τ(s·τ⁻¹(g_{r−1}⁻¹
+    g_{N−r+1})) on a group, the base points moved along).
+    """
+    r = model.order
+    sx, sg = nodes(model, start, r, "start")
+    ex, eg = nodes(model, end, r, "end")
+    count = N + 1 - 2 * r
+    if guess is None:
+        x = np.concatenate([sx, np.zeros((count, model.m)), ex])
+        g = np.concatenate([sg, np.zeros((count, sg.shape[1])), eg])
+        failed = interpolate(model, x, g, r - 1, N - r + 1, p,
+                             f"the default guess (pass guess=...): g_{r - 1}⁻¹ g_{N - r + 1}, "
+                             f"between the fixed ends,")
+        if failed is not None:
+            return failed
+    else:
+        gx, gg = nodes(model, guess, count, "guess of the free")
+        x, g = np.concatenate([sx, gx, ex]), np.concatenate([sg, gg, eg])
+    x, g = np.ascontiguousarray(x), np.ascontiguousarray(g)
+    f = fibres(model, x, g, p, h, lambda k: f"the initial path: w_{k} = g_{k}⁻¹ g_{k + 1}")
+    if isinstance(f, BVPResult):
+        return f
+    check_consistent(model, x, f, p, h, "boundary data or guess")
+    windows = N + 1 - r if model.constraints else 0
+    return Path(x, g, f, np.zeros((windows, model.constraints)))
+
+
+def increments(model, g, h: float, params=None) -> np.ndarray:
+    """ξ_k = τ⁻¹(g_k⁻¹ g_{k+1})/h of a path of configurations g (K, d, d).
+
+    Raises ValueError naming the element when an increment is outside the retraction's
+    chart (Cayley: a half-turn; exp: a rotation angle ≥ π).
+    """
+    if model.m or len(model.matrix_dims) != 1:
+        raise ValueError(f"model {model.name!r} is not on a matrix Lie group")
+    d, shape = model.matrix_dims[0], np.shape(g)
+    if len(shape) != 3 or shape[0] < 2:
+        raise ValueError(f"configurations g must have shape (K ≥ 2, {d}, {d}), got {shape}")
+    g = arguments.finite_array(g, (shape[0], d, d), "configurations g").reshape(shape[0], -1)
+    out = fibres(model, np.zeros((shape[0], 0)), g, model.params(params),
+                 arguments.step_size(h), lambda k: f"w_{k} = g_{k}⁻¹ g_{k + 1}")
+    if isinstance(out, BVPResult):
+        raise ValueError(out.message)
+    return out
