@@ -26,12 +26,20 @@ class Example:
     """A default run of a model, used by ``symvi run`` and the documentation.
 
     ``initial`` holds what the step map needs to start: for the pair groupoid the first
-    ``2·order`` nodes q_0, …, q_{2r−1}, as an array of shape (2r, n).
+    ``2·order`` nodes q_0, …, q_{2r−1}, as an array of shape (2r, n). A whole-trajectory
+    example (optimal control) gives the fixed nodes ``start`` and ``end`` of
+    ``solve_bvp`` instead, with ``n_steps`` = N.
     """
 
-    initial: Any
-    h: float
-    n_steps: int
+    initial: Any = None
+    h: float = 0.01
+    n_steps: int = 100
+    start: Any = None
+    end: Any = None
+
+    @property
+    def whole_trajectory(self) -> bool:
+        return self.start is not None
 
 
 def _sympify_parameters(parameters: Mapping[Any, float]) -> tuple[tuple[sp.Symbol, float], ...]:
@@ -136,7 +144,7 @@ class Model:
             self._validate_continuous()
         else:
             self._validate_discrete()
-        self._validate_extras()
+            self._validate_extras()
         self._validate_example()
 
     # -- validation -------------------------------------------------------------------
@@ -185,6 +193,7 @@ class Model:
         object.__setattr__(self, "order", rule.order)
         allowed = list(g.continuous_symbols(rule.order)) + list(self.parameter_symbols)
         self._check_symbols(L, allowed, "Lagrangian")
+        self._validate_extras()
         self._check_hessian(L, g.leading_symbols(rule.order), allowed)
 
     def _check_hessian(self, L: sp.Expr, highest: Sequence[sp.Symbol], allowed) -> None:
@@ -192,16 +201,23 @@ class Model:
 
         Its discretisation would then have D₁₂L_d (D₁₃L_d) singular as h → 0 — not a
         well-posed step map, even where a rule happens to make it invertible at finite h.
+        With constraints Φ the condition is on the bordered Hessian
+        [[∂²L/∂v², (∂Φ/∂v)ᵀ], [∂Φ/∂v, 0]] (v the highest derivatives).
         """
         hessian = sp.hessian(L, highest)
+        what = f"its Hessian with respect to {[str(s) for s in highest]}"
+        if self.constraints:
+            B = sp.Matrix([list(c.diff(v) for v in highest) for c in self.constraints])
+            hessian = sp.Matrix(sp.BlockMatrix([[hessian, B.T],
+                                                [B, sp.zeros(B.rows, B.rows)]]))
+            what = f"its Hessian bordered by the constraints' derivatives in {[str(s) for s in highest]}"
         free = [s for s in allowed if s not in self.parameter_symbols]
         rank = generic_rank(hessian, free, dict(self.parameters))
-        if rank is not None and rank < len(highest):
+        if rank is not None and rank < hessian.rows:
             which = "D₁₃L_d" if self.order == 2 else "D₁₂L_d"
             raise ModelError(
-                f"the Lagrangian of model {self.name!r} is not regular: its Hessian with "
-                f"respect to {[str(s) for s in highest]} has rank {rank} < "
-                f"{len(highest)} everywhere, so {which} of the discrete Lagrangian is "
+                f"the Lagrangian of model {self.name!r} is not regular: {what} has rank "
+                f"{rank} < {hessian.rows} everywhere, so {which} of the discrete Lagrangian is "
                 f"singular as h → 0")
 
     def _validate_discrete(self) -> None:
@@ -241,7 +257,7 @@ class Model:
                              "Lagrangian's discretisation; give `lagrangian`")
 
     def _validate_example(self) -> None:
-        if self.example is None:
+        if self.example is None or self.example.initial is None:
             return
         try:
             self.groupoid.check_initial(self.example.initial, self.order)

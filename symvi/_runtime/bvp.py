@@ -31,6 +31,15 @@ class _Problem:
     def __init__(self, model, p, h):
         self.model, self.p, self.h = model, p, h
         self.approximate_updates = bool(model.matrix_dims)
+        #: An unconstrained optimal-control problem minimises its cost: Newton steps are
+        #: then globalised on the cost itself (see :func:`_minimising_step`).
+        self.minimise = bool(model.info.get("controls")) and not model.constraints
+        self.shift = 0.0
+
+    def merit(self, path: Path) -> tuple[float, float]:
+        """The cost S = Σ L_d and the size of its rounding error."""
+        terms = self.model.along_vector("lagrangian", path.x, path.f, self.h, self.p)
+        return float(terms.sum()), float(np.abs(terms).sum()) * 64 * np.finfo(float).eps
 
     def assemble(self, path: Path, with_jacobian: bool):
         m, n_nodes = self.model, path.x.shape[0]
@@ -157,7 +166,11 @@ def _newton(problem, state, maxiter: int, xtol: float, ftol: float):
             moved = problem.moved(state, delta, 1.0)
             state, taken = (moved, size) if moved is not None else (state, None)
         else:
-            state, taken = _line_search(problem, state, delta, res)
+            taken = None
+            if problem.minimise:
+                state, taken = _minimising_step(problem, state, res, ab, bw, delta)
+            if taken is None:
+                state, taken = _line_search(problem, state, delta, res)
         if taken is None:
             level = _rounding_level(ab, bw, problem.magnitudes(state))
             if norms[-1] <= level:
@@ -191,6 +204,38 @@ def _rounding_level(ab: np.ndarray, bw: int, u: np.ndarray) -> float:
         else:
             scale[:offset] += np.abs(ab[d, -offset:]) * u[-offset:]
     return 16 * np.finfo(float).eps * float(scale.max(initial=0.0))
+
+
+def _minimising_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0**-12):
+    """A descent step on the cost S: Newton on its gradient R with the Hessian shifted by
+    μ·max|diag| until the step goes downhill and passes Armijo on S (Nocedal & Wright
+    §3.4); μ shrinks again after full steps. Far from a minimum this keeps Newton away
+    from saddles and maxima of S, where the residual-norm merit is content to go.
+    Returns (state, None) when S cannot resolve the step (near convergence, the predicted
+    decrease is below its rounding level) or no shift helps.
+    """
+    from scipy.linalg import solve_banded
+
+    cost, noise = problem.merit(state)
+    if -float(res @ delta) <= noise:
+        return state, None
+    scale, shift = float(np.abs(ab[bw]).max(initial=0.0)), problem.shift
+    while shift <= 1e3:
+        if shift > 0.0:
+            shifted = ab.copy()
+            shifted[bw] += shift * scale
+            delta = solve_banded((bw, bw), shifted, -res, check_finite=False)
+        slope = float(res @ delta)
+        alpha = 1.0
+        while slope < 0.0 and alpha >= min_alpha:
+            trial = problem.moved(state, delta, alpha)
+            if trial is not None and problem.merit(trial)[0] <= cost + 1e-4 * alpha * slope:
+                problem.shift = shift / 10 if alpha == 1.0 and shift > 1e-10 else \
+                    (0.0 if alpha == 1.0 else shift)
+                return trial, alpha * float(np.abs(delta).max(initial=0.0))
+            alpha /= 2
+        shift = max(10 * shift, 1e-8)
+    return state, None
 
 
 def _line_search(problem, state, delta, res, min_alpha: float = 2.0**-12):

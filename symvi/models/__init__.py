@@ -12,10 +12,14 @@ from pathlib import Path
 from ..errors import ModelError
 from ..model import Model
 
-_GROUP_MODELS = ("rigid_body", "heavy_top", "spherical_pendulum", "planar_body", "se3_body")
+_GROUP_MODELS = ("rigid_body", "heavy_top", "spherical_pendulum", "planar_body", "se3_body",
+                 "rigid_body_oc", "heavy_top_rotors_oc")
 BUNDLED = ("harmonic_oscillator", "pendulum", "double_pendulum", "cubic_spline",
-           "spline_potential", "so3_cubic") + tuple(f"{name}{suffix}" for name in _GROUP_MODELS
-                                       for suffix in ("", "_exp"))
+           "spline_potential", "so3_cubic", "double_pendulum_oc", "cart_pole_oc") \
+    + tuple(f"{name}{suffix}" for name in _GROUP_MODELS for suffix in ("", "_exp"))
+#: Optimal-control problems (constrained second-order models solved as whole trajectories).
+CONTROL = ("rigid_body_oc", "rigid_body_oc_exp", "heavy_top_rotors_oc",
+           "heavy_top_rotors_oc_exp", "double_pendulum_oc", "cart_pole_oc")
 
 
 def get(name: str) -> Model:

@@ -1,0 +1,128 @@
+"""Optimal control of mechanical systems on Lie algebroids (paper §3.3, DESIGN.md §4).
+
+A controlled mechanical system lives on the Lie algebroid AG of a groupoid: base
+coordinates q, fibre coordinates y, anchor ρ(q) and structure functions C(q)
+(:meth:`Groupoid.algebroid`), with a Lagrangian L(q, y). Its controlled equations are
+EL(L)_a = u_a on the actuated directions a and EL(L)_A = 0 on the others, with q̇ = ρ(q) y
+and the Euler–Lagrange operator of Appendix C.2
+
+    EL(L)_α = d/dt ∂L/∂y^α − ρ^i_α ∂L/∂q^i + C^γ_{αβ} y^β ∂L/∂y^γ,
+    d/dt F(q, y) = ∂F/∂q^i ρ^i_β y^β + ∂F/∂y^β ẏ^β.
+
+Minimising ∫ C(q, y, u) dt is then the second-order variational problem with
+L̃(q, y, ẏ) = C(q, y, EL(L)_a) (eq. ``costLtilde``), constrained by Φ^A = EL(L)_A = 0
+when underactuated (§3.3.2). :func:`optimal_control` builds that problem as a
+:class:`~symvi.model.Model` with constraints; the groupoid's second-order rule discretises
+L̃ and Φ (DESIGN.md §3) and the whole-trajectory solve finds the optimal path, its
+multipliers and the controls u_k = EL(L)_a at each window's quadrature point.
+"""
+from __future__ import annotations
+
+from typing import Any, Mapping, Sequence
+
+import sympy as sp
+
+from .errors import ModelError
+from .groupoids.base import Algebroid, Groupoid
+from .model import Example, Model, _scalar
+
+
+def euler_lagrange_operator(algebroid: Algebroid, lagrangian: sp.Expr) -> sp.Matrix:
+    """EL(L) of a Lagrangian L(q, y) on ``algebroid`` (paper Appendix C.2), an n-vector in
+    (q, y, ẏ). Its vanishing is the Euler–Lagrange (Euler–Poincaré, Lagrange–Poincaré)
+    equations; on TQ it is d/dt ∂L/∂q̇ − ∂L/∂q, on so(3) with L = ½ΩᵀIΩ it is
+    IΩ̇ + Ω×IΩ."""
+    q, y, ydot = algebroid.q, algebroid.y, algebroid.ydot
+    rho, C = algebroid.anchor, algebroid.structure
+    qdot = rho * sp.Matrix(y) if q else sp.zeros(0, 1)
+    dLdy = [sp.diff(lagrangian, v) for v in y]
+    dLdq = sp.Matrix([sp.diff(lagrangian, v) for v in q])
+
+    def ddt(F):
+        return sum((sp.diff(F, a) * b for a, b in zip(q, qdot)), sp.S.Zero) \
+            + sum((sp.diff(F, a) * b for a, b in zip(y, ydot)), sp.S.Zero)
+
+    n = len(y)
+    out = []
+    for alpha in range(n):
+        anchor_term = (rho[:, alpha].T * dLdq)[0, 0] if q else sp.S.Zero
+        bracket = sum((C[g][alpha, b] * y[b] * dLdy[g] for g in range(n) for b in range(n)),
+                      sp.S.Zero)
+        out.append(sp.expand(ddt(dLdy[alpha]) - anchor_term + bracket))
+    return sp.Matrix(out)
+
+
+def _actuated(actuated, n: int) -> tuple[int, ...]:
+    if actuated is None:
+        return tuple(range(n))
+    indices = tuple(int(a) for a in actuated)
+    bad = [a for a in indices if not 0 <= a < n]
+    if bad or len(set(indices)) != len(indices) or not indices:
+        raise ModelError(f"actuated directions must be distinct indices in 0..{n - 1} of the "
+                         f"fibre coordinates, got {list(actuated)}")
+    return tuple(sorted(indices))
+
+
+def _control_symbols(controls, count: int) -> tuple[sp.Symbol, ...]:
+    if isinstance(controls, str):
+        controls = controls.replace(",", " ").split()
+    symbols = tuple(sp.Symbol(c, real=True) if isinstance(c, str) else c for c in controls)
+    if not all(isinstance(s, sp.Symbol) for s in symbols) or len(set(symbols)) != len(symbols):
+        raise ModelError(f"controls must be distinct SymPy symbols (or names), got {controls!r}")
+    if len(symbols) != count:
+        raise ModelError(f"{len(symbols)} control symbols for {count} actuated directions")
+    return symbols
+
+
+def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
+                    controls: Sequence[Any] | str, actuated: Sequence[int] | None = None,
+                    parameters: Mapping[Any, float] | None = None,
+                    discretisation: str | None = None, example: Example | None = None,
+                    description: str = "") -> Model:
+    """The optimal-control problem min ∫ C(q, y, u) dt of a mechanical system on the
+    algebroid of ``groupoid``, as a constrained second-order :class:`Model`.
+
+    Parameters
+    ----------
+    groupoid:
+        Supplies the algebroid (q, y, ρ, C) and the discretisation.
+    lagrangian:
+        L(q, y) in the groupoid's first-order symbols (e.g. ``G.q, G.qdot``; ``G.xi``).
+    cost:
+        C(q, y, u) in those symbols and the control symbols.
+    controls:
+        One symbol per actuated direction: u_a = EL(L)_a.
+    actuated:
+        Indices a of the actuated fibre directions (default: all). The others give the
+        constraints Φ^A = EL(L)_A = 0 (an underactuated system, paper §3.3.2).
+    parameters, discretisation, example, description:
+        As for :class:`Model` (the discretisation defaults to the groupoid's second-order
+        rule).
+    """
+    algebroid = groupoid.algebroid()
+    parameters = dict(parameters or {})
+    L = _scalar(lagrangian, "Lagrangian")
+    known = set(groupoid.continuous_symbols(1)) | {
+        sp.Symbol(k, real=True) if isinstance(k, str) else k for k in parameters}
+    unknown = L.free_symbols - known
+    if unknown:
+        raise ModelError(f"undeclared symbol(s) {sorted(map(str, unknown))} in the Lagrangian "
+                         f"of {name!r}; it is L(q, y) in {list(map(str, groupoid.continuous_symbols(1)))}"
+                         f" and parameters")
+    directions = _actuated(actuated, len(algebroid.y))
+    u = _control_symbols(controls, len(directions))
+    C = _scalar(cost, "cost")
+    unknown = C.free_symbols - known - set(u)
+    if unknown:
+        raise ModelError(f"undeclared symbol(s) {sorted(map(str, unknown))} in the cost of "
+                         f"{name!r}; it is C(q, y, u) with controls {list(map(str, u))}")
+    if not C.free_symbols & set(u):
+        raise ModelError(f"the cost of {name!r} does not depend on the controls {list(map(str, u))}")
+    EL = euler_lagrange_operator(algebroid, L)
+    forces = [EL[a] for a in directions]
+    return Model(
+        name=name, groupoid=groupoid, lagrangian=C.xreplace(dict(zip(u, forces))),
+        discretisation=discretisation or groupoid.default_discretisation(2),
+        parameters=parameters, example=example, description=description,
+        constraints=[EL[A] for A in range(len(EL)) if A not in directions],
+        controls=forces)
