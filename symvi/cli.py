@@ -38,11 +38,13 @@ def _run(args) -> int:
     ex = model.example
     steps = args.steps if args.steps is not None else ex.n_steps
     h = args.h if args.h is not None else ex.h
+    print(f"model      {model.name} — {model.description}")
+    print(f"build      {built:.2f} s ({Path(args.output) / model.name})")
+    if ex.whole_trajectory:
+        return _solve(module, ex, steps, h)
     start = time.perf_counter()
     result = module.integrate(ex.initial, steps, h)
     elapsed = time.perf_counter() - start
-    print(f"model      {model.name} — {model.description}")
-    print(f"build      {built:.2f} s ({Path(args.output) / model.name})")
     print(f"integrate  {steps} steps, h = {h:g}, T = {steps * h:g}: {elapsed * 1e3:.1f} ms "
           f"({steps / max(elapsed, 1e-9):,.0f} steps/s)")
     print(f"status     {result.status.name}: {result.message}")
@@ -56,6 +58,23 @@ def _run(args) -> int:
               f"g = {np.array2string(result.g[-1].ravel(), precision=6)}")
     else:
         print(f"final      q = {np.array2string(result.q[-1], precision=6)}")
+    return 0 if result.success else 1
+
+
+def _solve(module, ex, steps: int, h: float) -> int:
+    """The whole-trajectory example (optimal control): solve and summarise."""
+    start = time.perf_counter()
+    result = module.solve_bvp(ex.start, ex.end, steps, h)
+    elapsed = time.perf_counter() - start
+    print(f"solve_bvp  N = {steps}, h = {h:g}, T = {steps * h:g}: {elapsed * 1e3:.1f} ms, "
+          f"{result.iterations} Newton iterations")
+    print(f"status     {result.status.name}: {result.message}")
+    print(f"cost       {result.cost:.12g}")
+    if result.controls is not None:
+        peak = np.abs(result.controls).max(axis=0)
+        print(f"controls   max |u| per control = {np.array2string(peak, precision=6)}")
+    if result.multipliers is not None:
+        print(f"multipliers max |λ| = {np.abs(result.multipliers).max():.6g}")
     return 0 if result.success else 1
 
 
@@ -77,7 +96,8 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument("--force", action="store_true", help="rebuild even if cached")
     c.add_argument("--verbose", action="store_true", help="show the compiler's output")
     c.set_defaults(func=_compile)
-    r = sub.add_parser("run", help="compile MODEL and integrate its example")
+    r = sub.add_parser("run", help="compile MODEL and run its example (integrate, or "
+                                   "solve the whole trajectory of an optimal-control problem)")
     r.add_argument("model")
     r.add_argument("-o", "--output", default="generated")
     r.add_argument("--steps", type=int, default=None)

@@ -74,6 +74,8 @@ class DerivedModel:
     #: Number s of constraints per window (multipliers λ^k ∈ R^s) and of controls.
     constraint_count: int = 0
     control_count: int = 0
+    #: Per fibre coordinate: an increment divided by h (a group factor's ξ).
+    step_scaled: tuple[bool, ...] = ()
 
     @property
     def stencil_elements(self) -> int:
@@ -311,5 +313,6 @@ def derive(dm: DiscreteModel) -> DerivedModel:
                         step=dm.step, kernels=kernels, whole_trajectory=g.whole_trajectory,
                         has_energy=dm.order == 1, fingerprint=dm.fingerprint,
                         constraint_count=len(dm.constraints), control_count=len(dm.controls),
+                        step_scaled=tuple(g.step_scaled()),
                         c_context=g.c_context(),
                         coefficients=tuple(sorted(coefficients, key=lambda c: c.__name__)))

@@ -6,7 +6,7 @@ import pytest
 from symvi.build import compile_model
 from symvi.derive import derive
 from symvi.discretise import discretise
-from symvi.models import BUNDLED, get
+from symvi.models import BUNDLED, CONTROL, get
 
 FIRST_ORDER = ("harmonic_oscillator", "pendulum", "double_pendulum")
 SECOND_ORDER = ("cubic_spline", "spline_potential")
@@ -17,7 +17,8 @@ LIE = ("rigid_body", "rigid_body_exp", "planar_body", "planar_body_exp", "so3_cu
 #: Bundled models on action groupoids Q×H.
 ACTION = ("heavy_top", "heavy_top_exp", "spherical_pendulum", "spherical_pendulum_exp",
           "se3_body", "se3_body_exp")
-assert set(PAIR + LIE + ACTION) == set(BUNDLED)
+#: Bundled optimal-control problems (constrained second-order models, whole trajectories).
+assert set(PAIR + LIE + ACTION + CONTROL) == set(BUNDLED)
 
 
 @pytest.fixture(scope="session")
@@ -49,4 +50,4 @@ def derived():
     return get_derived
 
 
-__all__ = ["BUNDLED", "FIRST_ORDER", "SECOND_ORDER", "PAIR", "LIE", "ACTION"]
+__all__ = ["BUNDLED", "FIRST_ORDER", "SECOND_ORDER", "PAIR", "LIE", "ACTION", "CONTROL"]

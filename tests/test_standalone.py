@@ -69,23 +69,37 @@ CHILD = textwrap.dedent("""
     sys.path.insert(0, spec["dir"])
     import importlib
     mod = importlib.import_module(spec["name"])
-    initial = spec["initial"]
-    if mod.INFO["kind"] == "lie":
-        initial = tuple(initial)
-    r = mod.integrate(initial, spec["n_steps"], spec["h"])
+    if "start" in spec:   # a whole-trajectory example (optimal control)
+        r = mod.solve_bvp(spec["start"], spec["end"], spec["n_steps"], spec["h"])
+        final, rows = r.f[-1], r.f.shape[0] + 1
+    else:
+        initial = spec["initial"]
+        if mod.INFO["kind"] == "lie":
+            initial = tuple(initial)
+        r = mod.integrate(initial, spec["n_steps"], spec["h"])
+        final, rows = r.q[-1], r.q.shape[0]
     loaded = sorted(m for m in sys.modules if m.split(".")[0] in ("sympy", "symvi")
                     and sys.modules[m] is not None)
     print(json.dumps({"success": bool(r.success), "message": r.message,
-                      "final": r.q[-1].tolist(), "rows": int(r.q.shape[0]),
+                      "final": final.tolist(), "rows": int(rows),
                       "file": mod.__file__, "loaded": loaded}))
 """)
 
 
-def run_standalone(directory: Path, name: str, initial, n_steps: int, h: float) -> dict:
-    as_list = (lambda v: [np.asarray(a, dtype=float).tolist() for a in v]) \
-        if isinstance(initial, tuple) else (lambda v: np.asarray(v, dtype=float).tolist())
-    spec = {"dir": str(directory), "name": name, "initial": as_list(initial),
-            "n_steps": int(n_steps), "h": float(h)}
+def _as_list(value):
+    """Nested arrays (tuples of arrays for (x, g) data) as JSON lists."""
+    if isinstance(value, tuple):
+        return [_as_list(v) for v in value]
+    return np.asarray(value, dtype=float).tolist()
+
+
+def run_standalone(directory: Path, name: str, example) -> dict:
+    spec = {"dir": str(directory), "name": name, "n_steps": int(example.n_steps),
+            "h": float(example.h)}
+    if example.whole_trajectory:
+        spec |= {"start": _as_list(example.start), "end": _as_list(example.end)}
+    else:
+        spec["initial"] = _as_list(example.initial)
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}
     proc = subprocess.run([sys.executable, "-c", CHILD, json.dumps(spec)], capture_output=True,
                           text=True, env=env, cwd=str(directory), timeout=300)
@@ -113,14 +127,19 @@ def test_cli_compile_then_standalone_import_runs_example(build_dir, compiled, na
     assert (package / "_runtime").is_dir()
 
     example = get(name).example
-    out = run_standalone(cli_dir, name, example.initial, example.n_steps, example.h)
+    out = run_standalone(cli_dir, name, example)
     assert out["success"], out["message"]
     assert out["loaded"] == []                       # neither sympy nor symvi was loaded
     assert Path(out["file"]).resolve() == (package / "__init__.py").resolve()
-    assert out["rows"] == 2 * get(name).order + example.n_steps
     # Same numbers as the in-process build of the same model (same C source and flags).
-    reference = compiled(name).integrate(example.initial, example.n_steps, example.h)
-    np.testing.assert_allclose(out["final"], reference.q[-1], rtol=1e-12, atol=1e-12)
+    if example.whole_trajectory:
+        assert out["rows"] == example.n_steps + 1
+        reference = compiled(name).solve_bvp(example.start, example.end, example.n_steps,
+                                             example.h).f[-1]
+    else:
+        assert out["rows"] == 2 * get(name).order + example.n_steps
+        reference = compiled(name).integrate(example.initial, example.n_steps, example.h).q[-1]
+    np.testing.assert_allclose(out["final"], reference, rtol=1e-12, atol=1e-12)
 
 
 def test_cli_second_compile_is_a_cache_hit(tmp_path):
@@ -211,7 +230,7 @@ def test_concurrent_compiles_into_same_directory(tmp_path):
     assert [e for e in entries if not e.endswith(".lock")] == [name], entries
     assert len(list((tmp_path / name).glob("_ext_*"))) == 1
     example = get(name).example
-    out = run_standalone(tmp_path, name, example.initial, example.n_steps, example.h)
+    out = run_standalone(tmp_path, name, example)
     assert out["success"], out["message"]
 
 
@@ -232,7 +251,7 @@ def test_interrupted_build_debris_does_not_break_compile_or_import(tmp_path):
     mod = compile_model(get(name), tmp_path)
     assert mod.integrate(example.initial, 100, example.h).success
     assert extension_of(partial).is_file()
-    out = run_standalone(tmp_path, name, example.initial, example.n_steps, example.h)
+    out = run_standalone(tmp_path, name, example)
     assert out["success"], out["message"]
 
     # a later compile of the same model is a cache hit despite the debris
@@ -250,7 +269,7 @@ def test_package_with_missing_extension_is_rebuilt(tmp_path):
     compile_model(get(name), tmp_path)
     assert extension_of(tmp_path / name).is_file()
     example = get(name).example
-    out = run_standalone(tmp_path, name, example.initial, example.n_steps, example.h)
+    out = run_standalone(tmp_path, name, example)
     assert out["success"], out["message"]
 
 
@@ -261,5 +280,5 @@ def test_generated_package_is_relocatable(tmp_path):
     shutil.copytree(tmp_path / "a" / name, tmp_path / "b" / name)
     shutil.rmtree(tmp_path / "a")
     example = get(name).example
-    out = run_standalone(tmp_path / "b", name, example.initial, example.n_steps, example.h)
+    out = run_standalone(tmp_path / "b", name, example)
     assert out["success"], out["message"]

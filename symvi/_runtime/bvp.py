@@ -19,22 +19,18 @@ from .results import BVPResult, Status
 class _Problem:
     """Newton's view of a path: residuals, banded Jacobian and updates, all in C.
 
-    Corrections above ``RELOG`` recompute group fibres ξ from the configurations (exactly
-    on the group); smaller ones move ξ by its first-order change, exact to O(|η|²) ≤ 1e-14,
-    and so avoid rounding ξ to ε/h, which a second-order residual would amplify by 1/h².
-    ``exact=False`` asks for the first-order change whatever the size (the line search's
-    second try).
+    An update composes each group fibre exactly, τ(hξ') = τ(−η_k) τ(hξ) τ(η_{k+1}), in
+    increment-minus-identity arithmetic: recomputing ξ from the configurations instead
+    would round it to ε/h, which the fourth-order structure of a second-order residual
+    amplifies into O(1) errors of the slowest modes at N = 10⁵.
     """
 
-    RELOG = 1e-7
-
     def __init__(self, model, p, h):
-        self.model, self.p, self.h = model, p, h
-        self.approximate_updates = bool(model.matrix_dims)
-        #: An unconstrained optimal-control problem minimises its cost: Newton steps are
+        self.model, self.p, self.h = model, p, h        #: An unconstrained optimal-control problem minimises its cost: Newton steps are
         #: then globalised on the cost itself (see :func:`_minimising_step`).
         self.minimise = bool(model.info.get("controls")) and not model.constraints
         self.shift = 0.0
+        self._band = self._work = None   # reused: fresh pages are slow to touch at large N
 
     def merit(self, path: Path) -> tuple[float, float]:
         """The cost S = Σ L_d and the size of its rounding error."""
@@ -45,21 +41,37 @@ class _Problem:
         m, n_nodes = self.model, path.x.shape[0]
         unknown = int(m.lib.symvi_bvp_unknowns(n_nodes))
         bw = int(m.lib.symvi_bvp_bandwidth())
-        res = np.zeros(unknown)
-        ab = np.zeros((2 * bw + 1, unknown)) if with_jacobian else None
+        res, ab = np.zeros(unknown), None
+        if with_jacobian:
+            if self._band is None or self._band.shape != (3 * bw + 1, unknown):
+                self._band = np.zeros((3 * bw + 1, unknown), order="F")
+                self._work = np.zeros_like(self._band, order="F")
+            ab = self._band
         code = m.lib.symvi_bvp_assemble(m.ptr(path.x), m.ptr(path.f), m.ptr(path.lam), n_nodes,
                                         m.ptr(self.p), self.h, m.ptr(res),
-                                        m.ptr(ab) if with_jacobian else m.ffi.NULL)
+                                        m.ptr(ab.T) if with_jacobian else m.ffi.NULL)
         return res, ab, bw, code == 0
 
-    def moved(self, path: Path, delta, alpha, exact=True):
+    def solve(self, ab, bw: int, rhs: np.ndarray, shift: float = 0.0) -> np.ndarray:
+        """Solve (J + shift·I) x = rhs with LAPACK's banded LU (dgbsv), J in the band
+        storage of :meth:`assemble` (left intact: the work copy is factorised)."""
+        from scipy.linalg import LinAlgError
+        from scipy.linalg.lapack import dgbsv
+
+        np.copyto(self._work, ab)
+        if shift:
+            self._work[2 * bw] += shift
+        _, _, x, info = dgbsv(bw, bw, self._work, rhs, overwrite_ab=True)
+        if info != 0:
+            raise LinAlgError(f"dgbsv: singular at column {info}" if info > 0 else "dgbsv")
+        return x
+
+    def moved(self, path: Path, delta, alpha):
         m, trial = self.model, path.copy()
         failed = m.ffi.new("long *")
-        relog = int(self.approximate_updates and exact
-                    and alpha * float(np.abs(delta).max(initial=0.0)) > self.RELOG)
         code = m.lib.symvi_bvp_update(m.ptr(trial.x), m.ptr(trial.g), m.ptr(trial.f),
                                       m.ptr(trial.lam), m.ptr(delta), alpha, path.x.shape[0],
-                                      m.ptr(self.p), self.h, relog, failed)
+                                      m.ptr(self.p), self.h, failed)
         return trial if code == 0 else None
 
     def size(self, path: Path) -> float:
@@ -69,15 +81,16 @@ class _Problem:
                    float(np.abs(path.lam).max(initial=0.0)))
 
     def magnitudes(self, path: Path) -> np.ndarray:
-        """Magnitude of every unknown, in the block layout of the C assembler."""
+        """Magnitude of every unknown, in the block layout of the C assembler: a node
+        correction is as precise as the fibres meeting there (a group fibre is held as
+        its increment hξ, a pair fibre is the node itself), a multiplier as itself."""
         m, r, s = self.model, self.model.order, self.model.constraints
         t0 = r - 1 if s else r
         blocks = np.arange(t0, path.x.shape[0] - t0)
-        if not m.matrix_dims and m.m == m.n:
-            eta = np.abs(path.x[blocks])
-        else:
-            top = np.abs(path.x[blocks]).max(axis=1, initial=1.0)
-            eta = np.repeat(top[:, None], m.n, axis=1)
+        scaled = np.array(m.info.get("step_scaled") or [False] * m.n, dtype=bool)
+        before = np.abs(path.f[np.maximum(blocks - 1, 0)])
+        after = np.abs(path.f[np.minimum(blocks, path.f.shape[0] - 1)])
+        eta = np.where(scaled, self.h * np.maximum(before, after), before)
         lam = np.abs(path.lam[blocks - 1]) if s else np.zeros((len(blocks), 0))
         return np.concatenate([eta, lam], axis=1).reshape(-1)
 
@@ -143,7 +156,7 @@ def _result(model, path: Path, p, h, common: dict) -> BVPResult:
 
 def _newton(problem, state, maxiter: int, xtol: float, ftol: float):
     """Damped Newton; returns (state, residual norms, step norms, status, message)."""
-    from scipy.linalg import LinAlgError, solve_banded
+    from scipy.linalg import LinAlgError
 
     norms, steps, status, message = [], [], Status.MAX_ITERATIONS, ""
     for it in range(maxiter):
@@ -156,15 +169,20 @@ def _newton(problem, state, maxiter: int, xtol: float, ftol: float):
             status = Status.SUCCESS
             break
         try:
-            delta = solve_banded((bw, bw), ab, -res, check_finite=False)
+            delta = problem.solve(ab, bw, -res)
         except (LinAlgError, ValueError):
             status, message = Status.SINGULAR_JACOBIAN, f"singular Jacobian at iteration {it}"
             break
         size = float(np.abs(delta).max(initial=0.0))
+        level = _rounding_level(ab[bw:], bw, problem.magnitudes(state))
         if size <= xtol * (1.0 + problem.size(state)):
             # Already converged: round-off defeats a line search.
             moved = problem.moved(state, delta, 1.0)
             state, taken = (moved, size) if moved is not None else (state, None)
+        elif norms[-1] <= level:
+            # Near the rounding level only a full step can still help; backtracking would
+            # chase noise.
+            state, taken = _line_search(problem, state, delta, res, min_alpha=1.0)
         else:
             taken = None
             if problem.minimise:
@@ -172,7 +190,6 @@ def _newton(problem, state, maxiter: int, xtol: float, ftol: float):
             if taken is None:
                 state, taken = _line_search(problem, state, delta, res)
         if taken is None:
-            level = _rounding_level(ab, bw, problem.magnitudes(state))
             if norms[-1] <= level:
                 status = Status.SUCCESS  # no descent left below the rounding level
                 message = f" (at the rounding level {level:.1e} of the residual)"
@@ -190,7 +207,8 @@ def _newton(problem, state, maxiter: int, xtol: float, ftol: float):
 
 
 def _rounding_level(ab: np.ndarray, bw: int, u: np.ndarray) -> float:
-    """Attainable residual: 16 ε ‖ |J| u ‖∞, u the unknowns' magnitudes (first order).
+    """Attainable residual: 16 ε ‖ |J| u ‖∞, u the unknowns' magnitudes (first order);
+    ``ab`` holds J's 2 bw + 1 diagonals, ab[bw + row − col, col] = J[row, col].
 
     When the line search finds no descent from a residual below it, Newton has converged
     as far as floating point allows, even if its update, amplified by the condition
@@ -214,17 +232,13 @@ def _minimising_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0*
     Returns (state, None) when S cannot resolve the step (near convergence, the predicted
     decrease is below its rounding level) or no shift helps.
     """
-    from scipy.linalg import solve_banded
-
     cost, noise = problem.merit(state)
     if -float(res @ delta) <= noise:
         return state, None
-    scale, shift = float(np.abs(ab[bw]).max(initial=0.0)), problem.shift
+    scale, shift = float(np.abs(ab[2 * bw]).max(initial=0.0)), problem.shift
     while shift <= 1e3:
         if shift > 0.0:
-            shifted = ab.copy()
-            shifted[bw] += shift * scale
-            delta = solve_banded((bw, bw), shifted, -res, check_finite=False)
+            delta = problem.solve(ab, bw, -res, shift * scale)
         slope = float(res @ delta)
         alpha = 1.0
         while slope < 0.0 and alpha >= min_alpha:
@@ -239,19 +253,12 @@ def _minimising_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0*
 
 
 def _line_search(problem, state, delta, res, min_alpha: float = 2.0**-12):
-    """Backtrack α = 1, ½, … until ‖R‖₂ decreases (Armijo, c = 1e-4).
-
-    Each α is tried with the exact update, then with the first-order one (on groups,
-    recomputing ξ from the configurations adds a rounding floor to the residual that a
-    small final correction cannot get below).
-    """
+    """Backtrack α = 1, ½, … until ‖R‖₂ decreases (Armijo, c = 1e-4)."""
     base = float(np.dot(res, res))
     alpha = 1.0
     while alpha >= min_alpha:
-        for exact in (True, False) if problem.approximate_updates else (True,):
-            trial = problem.moved(state, delta, alpha, exact)
-            if trial is None:
-                continue
+        trial = problem.moved(state, delta, alpha)
+        if trial is not None:
             trial_res, _, _, finite = problem.assemble(trial, False)
             if finite and float(np.dot(trial_res, trial_res)) <= (1 - 1e-4 * alpha) * base:
                 return trial, alpha * float(np.abs(delta).max(initial=0.0))
