@@ -1,12 +1,19 @@
 """Shared fixtures: every bundled model is compiled once per test session."""
 from __future__ import annotations
 
-import pytest
+import os
 
-from symvi.build import compile_model
-from symvi.derive import derive
-from symvi.discretise import discretise
-from symvi.models import BUNDLED, CONTROL, get
+# Small dense solves (SLSQP, Newton) run many times slower with threaded BLAS on a loaded
+# 2-core machine; pin it before NumPy is imported.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import pytest  # noqa: E402
+
+from symvi.build import compile_model  # noqa: E402
+from symvi.derive import derive  # noqa: E402
+from symvi.discretise import discretise  # noqa: E402
+from symvi.models import BUNDLED, CONTROL, get  # noqa: E402
 
 FIRST_ORDER = ("harmonic_oscillator", "pendulum", "double_pendulum")
 SECOND_ORDER = ("cubic_spline", "spline_potential")

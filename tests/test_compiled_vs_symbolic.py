@@ -522,10 +522,14 @@ def test_jacobians_match_central_differences(name, compiled, derived):
         err = np.abs(jac - fd)
         assert np.all(err <= bound), (name, kernel.name, float((err / bound).max()))
         # Discriminating: the bound is below 1e-6 of the Jacobian's row, at every point with
-        # all coefficients on the series branch (see module docstring for the others).
+        # all coefficients on the series branch (see module docstring for the others);
+        # 1e-5 for optimal-control residuals, whose truncation term δ²/6·|∂³R/∂z³| is
+        # larger: L̃ is quadratic in accelerations (q_{k+1} − 2q_k + q_{k−1})/h², so at
+        # h = 0.01 the third derivative carries a further 1/h² against the first.
         row = np.maximum(np.abs(jac).max(axis=2, keepdims=True), 1.0)
         narrow = slice(0, N // 2) if coefficient_arguments(kernel) else slice(None)
-        assert np.all(bound[narrow] <= 1e-6 * row[narrow]), float((bound / row)[narrow].max())
+        sharp = 1e-5 if dm.control_count else 1e-6
+        assert np.all(bound[narrow] <= sharp * row[narrow]), float((bound / row)[narrow].max())
         worst = float((err / row).max())
         RECORD[name, kernel.name, "fd"] = worst, float(np.mean(bound <= 1e-6 * row))
         assert worst < 1e-7
