@@ -26,7 +26,8 @@ class _Problem:
     """
 
     def __init__(self, model, p, h):
-        self.model, self.p, self.h = model, p, h        #: An unconstrained optimal-control problem minimises its cost: Newton steps are
+        self.model, self.p, self.h = model, p, h
+        #: An unconstrained optimal-control problem minimises its cost: Newton steps are
         #: then globalised on the cost itself (see :func:`_minimising_step`).
         self.minimise = bool(model.info.get("controls")) and not model.constraints
         self.shift = 0.0
@@ -203,6 +204,8 @@ def _newton(problem, state, maxiter: int, xtol: float, ftol: float):
             break
     else:
         message = f"Newton's method did not converge in {maxiter} iterations"
+        # the residual of the path returned, after the last update
+        norms.append(float(np.abs(problem.assemble(state, False)[0]).max(initial=0.0)))
     return state, norms, steps, status, message
 
 
