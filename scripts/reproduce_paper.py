@@ -55,6 +55,20 @@ def midpoints(t: np.ndarray) -> np.ndarray:
     return t[1:-1]
 
 
+def finish(fig, axes, title: str, path: Path) -> None:
+    """Legends, grids, the time axis and the title; write the PNG."""
+    import matplotlib.pyplot as plt
+
+    for ax in axes:
+        ax.legend(loc="best", fontsize=8)
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("t")
+    fig.suptitle(title)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
 def plot_rigid_body(result, path: Path) -> None:
     import matplotlib.pyplot as plt
 
@@ -66,14 +80,7 @@ def plot_rigid_body(result, path: Path) -> None:
     axes[1].set_ylabel("angular velocity $\\xi_k$")
     axes[2].plot(midpoints(t), result.controls, label=["$\\tau_1$", "$\\tau_2$", "$\\tau_3$"])
     axes[2].set_ylabel("torques $\\tau_k$")
-    axes[2].set_xlabel("t")
-    for ax in axes:
-        ax.legend(loc="best", fontsize=8)
-        ax.grid(alpha=0.3)
-    fig.suptitle(f"Rigid body optimal control on SO(3), cost {result.cost:.6g}")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    finish(fig, axes, f"Rigid body optimal control on SO(3), cost {result.cost:.6g}", path)
 
 
 def plot_heavy_top(result, path: Path) -> None:
@@ -93,14 +100,7 @@ def plot_heavy_top(result, path: Path) -> None:
     axes[3].plot(midpoints(t), result.multipliers,
                  label=["$\\lambda_1$", "$\\lambda_2$", "$\\lambda_3$"])
     axes[3].set_ylabel("multipliers $\\lambda_k$")
-    axes[3].set_xlabel("t")
-    for ax in axes:
-        ax.legend(loc="best", fontsize=8)
-        ax.grid(alpha=0.3)
-    fig.suptitle(f"Heavy top with two rotors (underactuated), cost {result.cost:.6g}")
-    fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    finish(fig, axes, f"Heavy top with two rotors (underactuated), cost {result.cost:.6g}", path)
 
 
 def main(argv: list[str] | None = None) -> int:
