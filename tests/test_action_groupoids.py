@@ -60,6 +60,7 @@ from symvi import (SO3, ActionGroupoid, Model, ModelError, PairGroupoid,
                    ProductGroupoid)
 from symvi.build import compile_model
 from symvi.models import get
+from so3 import hat
 
 U = np.finfo(float).eps
 E3 = np.array([0.0, 0.0, 1.0])
@@ -376,10 +377,6 @@ T_CONV = 2.0
 N_CONV = [50, 100, 200, 400]
 
 
-def hat3(v):
-    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
-
-
 @pytest.fixture(scope="module")
 def pendulum_reference():
     """Bob b, velocity v and the rod's spin-free frame R (Ṙ = RΩ̂, Ω₃ = 0, b = −ℓRe₃):
@@ -394,7 +391,7 @@ def pendulum_reference():
         kappa = (GRAVITY * b[2] - v @ v) / ELL**2
         body = R.T @ v                           # = −ℓ Ω × e₃ = −ℓ (Ω₂, −Ω₁, 0)
         Omega = np.array([body[1], -body[0], 0.0]) / ELL
-        return np.concatenate([v, -GRAVITY * E3 + kappa * b, (R @ hat3(Omega)).reshape(-1)])
+        return np.concatenate([v, -GRAVITY * E3 + kappa * b, (R @ hat(Omega)).reshape(-1)])
 
     sol = solve_ivp(rhs, (0.0, T_CONV), np.concatenate([b0, v0, R0_PENDULUM.reshape(-1)]),
                     method="DOP853", rtol=1e-12, atol=1e-12, dense_output=True)

@@ -129,10 +129,24 @@ def _walk(expr, memo, node):
     return memo[expr]
 
 
+class _Evaluator:
+    """Evaluates SymPy expressions by one graph walk over ``memo`` (symbol → value);
+    subclasses give the arithmetic of one node (``_node``)."""
+
+    memo: dict
+
+    def define(self, definitions):
+        for symbol, expr in definitions:
+            self.memo[symbol] = self(expr)
+
+    def __call__(self, expr):
+        return _walk(expr, self.memo, self._node)
+
+
 # ---- value, magnitude and depth -------------------------------------------------------
 
 
-class Rounding:
+class Rounding(_Evaluator):
     """(value, mag, k) of SymPy expressions at a batch of points (see module docstring).
 
     ``inputs`` maps symbols to value arrays (or scalars), exact unless ``depth`` says
@@ -146,13 +160,6 @@ class Rounding:
         self.memo = {s: (v, np.abs(v), depth.get(s, 0)) for s, v in inputs.items()}
         self.arguments = []
         self.perturb = perturb
-
-    def define(self, definitions):
-        for symbol, expr in definitions:
-            self.memo[symbol] = self(expr)
-
-    def __call__(self, expr):
-        return _walk(expr, self.memo, self._node)
 
     def _node(self, e, args):
         if e.is_Number:
@@ -394,19 +401,12 @@ def _compose(f, x):
                      f[1] * x[3] + f[2] * x[1] * x[2] + f[3] * x[1] ** 3 / 6])
 
 
-class Taylor:
+class Taylor(_Evaluator):
     """Taylor coefficients to degree 3 in t of SymPy expressions along z + t·e_i, at a
     batch of points (arrays 4 × batch). ``inputs`` maps symbols to such arrays."""
 
     def __init__(self, inputs):
         self.memo = dict(inputs)
-
-    def define(self, definitions):
-        for symbol, expr in definitions:
-            self.memo[symbol] = self(expr)
-
-    def __call__(self, expr):
-        return _walk(expr, self.memo, self._node)
 
     def _node(self, e, args):
         if e.is_Number:

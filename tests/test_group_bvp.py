@@ -36,36 +36,15 @@ from scipy.spatial.transform import Rotation
 
 import symvi
 from symvi.build import compile_model
+from so3 import I3, cay, cay_inv, hat, vee
 
 EPS = np.finfo(float).eps
-I3 = np.eye(3)
 RETRACTIONS = ("cayley", "exp")
-#: Corrections larger than this recompute ξ from the configurations; smaller ones update
-#: ξ to first order (symvi/_runtime/bvp.py).
 
 
 # ---------------------------------------------------------------------------------------
 # NumPy helpers, independent of the generated code
 # ---------------------------------------------------------------------------------------
-def hat(v) -> np.ndarray:
-    """so(3) hat map in the basis e1, e2, e3 of ``symvi.SO3``."""
-    x, y, z = np.asarray(v, dtype=float)
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-
-
-def vee(X) -> np.ndarray:
-    return np.array([X[2, 1], X[0, 2], X[1, 0]])
-
-
-def cay(X) -> np.ndarray:
-    return np.linalg.solve(I3 - X / 2, I3 + X / 2)
-
-
-def cay_inv(W) -> np.ndarray:
-    """X = 2 (W − I)(W + I)⁻¹, i.e. X (W + I) = 2 (W − I)."""
-    return 2 * np.linalg.solve((W + I3).T, (W - I3).T).T
-
-
 def tau(retraction: str, v) -> np.ndarray:
     """τ(Σ v_a E_a)."""
     return cay(hat(v)) if retraction == "cayley" else expm(hat(v))

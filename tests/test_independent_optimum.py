@@ -41,8 +41,8 @@ from scipy.optimize import minimize
 
 from symvi.models import get
 from symvi.models import heavy_top_rotors_oc
+from so3 import cay, cay_inv, hat, vee
 
-EYE = np.eye(3)
 FTOL, MAXITER = 1e-12, 500
 CS = 1e-30          # complex-step size: derivatives exact to rounding
 
@@ -50,27 +50,6 @@ CS = 1e-30          # complex-step size: derivatives exact to rounding
 # ---------------------------------------------------------------------------------------
 # Independent NumPy helpers (leading batch axes allowed everywhere, complex-safe)
 # ---------------------------------------------------------------------------------------
-def hat(v):
-    z = np.zeros_like(v[..., 0])
-    return np.stack([np.stack([z, -v[..., 2], v[..., 1]], -1),
-                     np.stack([v[..., 2], z, -v[..., 0]], -1),
-                     np.stack([-v[..., 1], v[..., 0], z], -1)], -2)
-
-
-def vee(X):
-    return np.stack([X[..., 2, 1], X[..., 0, 2], X[..., 1, 0]], -1)
-
-
-def cay(X):
-    """(I − X/2)⁻¹(I + X/2)."""
-    return np.linalg.solve(EYE - X / 2, EYE + X / 2)
-
-
-def cay_inv(W):
-    """2(W − I)(W + I)⁻¹; the two factors commute."""
-    return np.linalg.solve(W + EYE, 2 * (W - EYE))
-
-
 def increment(g0, g1, h):
     """ξ with g1 = g0 cay(hξ̂)."""
     return vee(cay_inv(g0.T @ g1)) / h

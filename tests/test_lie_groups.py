@@ -32,6 +32,7 @@ from symvi.models import get
 from group_oracle import EPS_FD
 from group_oracle import assert_stationary
 from group_oracle import oracle as group_oracle
+from so3 import hat
 
 U = np.finfo(float).eps
 
@@ -283,7 +284,7 @@ def test_spatial_momentum_and_orthogonality(compiled, name):
     assert det < 1e-12
     # node-0 momentum (F⁻) of the first-order rule: μ_0 = (dτ⁻¹_{hξ_0})ᵀ I ξ_0
     x = H_LONG * OMEGA0
-    X = np.array([[0, -x[2], x[1]], [x[2], 0, -x[0]], [-x[1], x[0], 0]])
+    X = hat(x)
     np.testing.assert_allclose(res.momenta[0], _dtau_inv(name, X).T @ (INERTIA * OMEGA0),
                                rtol=1e-14)
 
@@ -330,16 +331,12 @@ T_CONV = 2.0
 N_CONV = [50, 100, 200, 400]
 
 
-def _hat3(v):
-    return np.array([[0, -v[2], v[1]], [v[2], 0, -v[0]], [-v[1], v[0], 0]])
-
-
 @pytest.fixture(scope="module")
 def euler_reference():
     def rhs(t, y):
         Om, R = y[:3], y[3:].reshape(3, 3)
         dOm = np.cross(INERTIA * Om, Om) / INERTIA
-        return np.concatenate([dOm, (R @ _hat3(Om)).reshape(-1)])
+        return np.concatenate([dOm, (R @ hat(Om)).reshape(-1)])
     sol = solve_ivp(rhs, (0.0, T_CONV), np.concatenate([OMEGA0, np.eye(3).reshape(-1)]),
                     method="DOP853", rtol=1e-12, atol=1e-12, dense_output=True)
     assert sol.success

@@ -30,9 +30,9 @@ from scipy.spatial.transform import Rotation
 
 from symvi import ModelError, PairGroupoid, optimal_control
 from symvi.models import CONTROL, get
+from so3 import I3, cay, cay_inv, hat, vee
 
 U = np.finfo(float).eps
-I3 = np.eye(3)
 N_ORACLE = 48          # steps of the oracle's and the equations' solutions
 EPS_FD = 1e-3          # five-point difference step of the oracle
 TOL_ORACLE = 1e-8      # relative gradient of S_aug accepted as stationary
@@ -42,17 +42,12 @@ TOL_EQ = 1e-9          # relative residual of the controlled equations
 # ---------------------------------------------------------------------------------------
 # NumPy geometry and physics, independent of the generated code
 # ---------------------------------------------------------------------------------------
-def hat(v) -> np.ndarray:
-    x, y, z = v
-    return np.array([[0.0, -z, y], [z, 0.0, -x], [-y, x, 0.0]])
-
-
 def tau(retraction: str, v) -> np.ndarray:
     """cay(v̂) = (I − v̂/2)⁻¹(I + v̂/2), resp. exp(v̂) by Rodrigues' formula
     I + (sin θ/θ) v̂ + ½ (sin(θ/2)/(θ/2))² v̂², θ = |v| (scipy's expm is ~1000× slower)."""
     X = hat(v)
     if retraction == "cayley":
-        return np.linalg.solve(I3 - X / 2, I3 + X / 2)
+        return cay(X)
     angle = np.linalg.norm(v)
     return I3 + np.sinc(angle / np.pi) * X + 0.5 * np.sinc(angle / (2 * np.pi)) ** 2 * X @ X
 
@@ -60,8 +55,7 @@ def tau(retraction: str, v) -> np.ndarray:
 def tau_inv(retraction: str, W) -> np.ndarray:
     """Coordinates of τ⁻¹(W): 2(W − I)(W + I)⁻¹, resp. the rotation vector of W."""
     if retraction == "cayley":
-        X = 2 * np.linalg.solve((W + I3).T, (W - I3).T).T
-        return np.array([X[2, 1], X[0, 2], X[1, 0]])
+        return vee(cay_inv(W))
     return Rotation.from_matrix(W).as_rotvec()
 
 
