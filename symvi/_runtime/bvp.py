@@ -1,8 +1,8 @@
 """Whole-trajectory solve: Newton on all free nodes at once (DESIGN.md §4).
 
 The residual at node j involves nodes j−r … j+r, so the Jacobian is block-banded; C
-assembles it in LAPACK band layout and SciPy's ``solve_banded`` factorises it, so one
-iteration costs O(N). The unknowns are corrections η_j of the free nodes, applied as the
+assembles it in LAPACK's band storage and ``dgbsv`` factorises it, so one iteration costs
+O(N). The unknowns are corrections η_j of the free nodes, applied as the
 node variation g → g·τ(η) (pair groupoid: q_j += η_j; matrix groups: g_j ← g_j τ(η_j),
 which keeps the product of the increments equal to g_0⁻¹g_N), and, with constraints, the
 multipliers λ^k of every window (paper §3.2, eq. ``constrainedso``).
