@@ -1,6 +1,7 @@
-"""Command line: ``symvi compile``, ``symvi run`` and ``symvi list``.
+"""Command line: ``symvi compile``, ``symvi run``, ``symvi check`` and ``symvi list``.
 
-Exit codes: 0 success, 1 a build or a solve failed, 2 bad input (model or arguments).
+Exit codes: 0 success, 1 a build, a solve or a check failed, 2 bad input (model or
+arguments).
 """
 from __future__ import annotations
 
@@ -78,6 +79,21 @@ def _solve(module, ex, steps: int, h: float) -> int:
     return 0 if result.success else 1
 
 
+def _check(args) -> int:
+    from .checks import CHECKS, check
+    from .models import load_with_equations
+    only = None
+    if args.only:
+        only = [n.strip() for n in args.only.split(",") if n.strip()]
+        unknown = [n for n in only if n not in CHECKS]
+        if unknown:
+            raise ValueError(f"unknown check(s) {unknown}; checks: {', '.join(CHECKS)}")
+    model, equations = load_with_equations(args.model)
+    report = check(model, only=only, equations=equations)
+    print(report.to_json() if args.json else report.format())
+    return report.exit_code
+
+
 def _list(args) -> int:
     from .models import get
     for name in BUNDLED:
@@ -103,6 +119,15 @@ def parser() -> argparse.ArgumentParser:
     r.add_argument("--steps", type=int, default=None)
     r.add_argument("--h", type=float, default=None)
     r.set_defaults(func=_run)
+    k = sub.add_parser("check", help="run the derivation checks on MODEL (exit 0: all "
+                                     "pass, 1: a check failed, 2: bad input)")
+    k.add_argument("model", help="a model file (.py defining `model` and optionally "
+                                 "`equations`), a bundled model or a paper fixture "
+                                 "(paper_rigid_body, paper_heavy_top_rotors)")
+    k.add_argument("--only", default=None, help="comma-separated checks to run (default: "
+                                                "all)")
+    k.add_argument("--json", action="store_true", help="print the report as JSON")
+    k.set_defaults(func=_check)
     ls = sub.add_parser("list", help="list the bundled models")
     ls.set_defaults(func=_list)
     return p

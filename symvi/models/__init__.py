@@ -33,9 +33,23 @@ def get(name: str) -> Model:
 
 def load(spec: str) -> Model:
     """A bundled model by name, or the ``model`` defined by a Python model file."""
+    return load_with_equations(spec)[0]
+
+
+def load_with_equations(spec: str) -> tuple[Model, tuple]:
+    """The model named by ``spec`` and the hand-derived equations that come with it.
+
+    ``spec`` is a bundled model name (no equations), a paper fixture name
+    (:data:`symvi.fixtures.FIXTURES`: the model and the paper's printed equations) or a
+    Python model file defining ``model`` and, optionally, ``equations``.
+    """
+    from ..fixtures import FIXTURES
     path = Path(spec)
     if path.suffix != ".py":
-        return get(spec)
+        if spec in FIXTURES:
+            module = importlib.import_module(f"{__package__.rsplit('.', 1)[0]}.fixtures.{spec}")
+            return module.model, tuple(module.equations)
+        return get(spec), ()
     if not path.is_file():
         raise ModelError(f"model file {spec!r} does not exist")
     namespace = runpy.run_path(str(path))
@@ -44,4 +58,4 @@ def load(spec: str) -> Model:
         found = [k for k, v in namespace.items() if isinstance(v, Model)]
         hint = f" (found Model objects named {found})" if found else ""
         raise ModelError(f"model file {spec!r} must define `model = symvi.Model(...)`{hint}")
-    return model
+    return model, tuple(namespace.get("equations", ()))
