@@ -10,11 +10,12 @@ from .errors import BuildError, CompilerNotFoundError, ModelError, SymviError  #
 from .groupoids import (SE2, SE3, SO3, ActionGroupoid, Groupoid, MatrixLieGroup,  # noqa: E402
                         PairGroupoid, ProductGroupoid)
 from .model import Example, Model, h  # noqa: E402
+from .symmetry import Symmetry  # noqa: E402
 from .control import euler_lagrange_operator, optimal_control  # noqa: E402
 from .build import compile_model, load  # noqa: E402
 
 
-__all__ = ["Model", "Example", "optimal_control", "euler_lagrange_operator", "PairGroupoid", "MatrixLieGroup", "ActionGroupoid",
+__all__ = ["Model", "Example", "Symmetry", "optimal_control", "euler_lagrange_operator", "PairGroupoid", "MatrixLieGroup", "ActionGroupoid",
            "ProductGroupoid", "SO3", "SE2", "SE3",
            "Groupoid", "h", "compile_model", "load",
            "ModelError", "BuildError", "CompilerNotFoundError", "SymviError", "__version__"]

@@ -76,6 +76,8 @@ class DerivedModel:
     control_count: int = 0
     #: Per fibre coordinate: an increment divided by h (a group factor's ξ).
     step_scaled: tuple[bool, ...] = ()
+    #: Names of the conserved quantities F_Z of the ``noether`` kernel.
+    symmetries: tuple[str, ...] = ()
 
     @property
     def stencil_elements(self) -> int:
@@ -238,11 +240,67 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
         kernels.append(Kernel("controls", window.z,
                               (("value", engine.window_values(window, 0, dm.controls)),),
                               "controls u at the window's quadrature point", window.definitions))
+    if dm.symmetries and not constrained:
+        half = _stencil(dm, 2 * r - 1)
+        kernels.append(Kernel("noether", half.z, (("value", noether_quantities(dm, engine, half)),),
+                              "conserved F_Z of the declared symmetries at node r−1 (§4.4)",
+                              half.definitions))
     if r == 1:
         energy = _energy(dm, engine.lagrangian(one, 0), one.fs[0])
         kernels.append(Kernel("energy", one.z, (("value", sp.Matrix([energy])),),
                               "discrete energy E_d = −∂L_d/∂h (Kane, Marsden & Ortiz)"))
     return tuple(kernels)
+
+
+def _section(symmetry, groupoid, x) -> sp.Matrix:
+    """Z(x): the symmetry's coefficients at base point x."""
+    return sp.Matrix(symmetry.section).xreplace(dict(zip(groupoid.algebroid().q, x)))
+
+
+def _potential(symmetry, dm: DiscreteModel, st: _Stencil, first: int) -> sp.Expr:
+    """f on the r−1 elements from element ``first`` (first order: f at base point ``first``)."""
+    g = dm.groupoid
+    if dm.order == 1:
+        mapping = dict(zip(g.algebroid().q, st.xs[first]))
+    else:
+        mapping = g.discrete_mapping(1, [st.xs[first]], [st.fs[first]])
+    return symmetry.potential.xreplace(mapping)
+
+
+def noether_quantities(dm: DiscreteModel, engine: "_Engine", half: _Stencil) -> sp.Matrix:
+    """F_Z = ⟨p, Z⟩ − f at node r−1 of 2r−1 elements, one per declared symmetry (§4.4).
+
+    ⟨p, Z⟩ is minus the change of the windows 0 … r−1 that straddle node r−1 when the
+    nodes 0 … r−1 move along Z (for r = 1, ⟨−D₁L_d, Z⟩ = ⟨F⁻L_d, Z⟩); f is the potential
+    on elements 0 … r−2. Moving the node on by one changes F_Z by −Z·(residual there),
+    the windows' own changes cancelling by (quasi-)invariance, so F_Z is conserved.
+    """
+    r, g = dm.order, dm.groupoid
+    values = []
+    for z in dm.symmetries:
+        change = sum(((_section(z, g, half.xs[i]).T * engine.variation(half, i, range(r)))[0, 0]
+                      for i in range(r)), sp.S.Zero)
+        values.append(-change - _potential(z, dm, half, 0))
+    return sp.Matrix(values)
+
+
+def invariance_defect(dm: DiscreteModel, symmetry) -> tuple[tuple[sp.Expr, ...], _Stencil]:
+    """The terms of δL_d − (f(last r−1 elements) − f(first r−1 elements)) on one window of
+    r elements — the change of L_d when each node i = 0 … r moves along Z, then minus the
+    potential difference — with the stencil whose symbols (and named base points) they
+    use. Their sum vanishes identically for a (quasi-)invariant L_d (paper §4.4)."""
+    engine, r, g = _Engine(dm), dm.order, dm.groupoid
+    window = _stencil(dm, r)
+    nodes = list(window.xs) + [tuple(g.target(window.xs[-1], window.fs[-1], dm.step))]
+    terms = [(_section(symmetry, g, nodes[i]).T * engine.variation(window, i, [0]))[0, 0]
+             for i in range(r + 1)]
+    if r == 1:
+        base = g.algebroid().q
+        terms += [symmetry.potential.xreplace(dict(zip(base, nodes[0]))),
+                  -symmetry.potential.xreplace(dict(zip(base, nodes[1])))]
+    else:
+        terms += [_potential(symmetry, dm, window, 0), -_potential(symmetry, dm, window, 1)]
+    return tuple(terms), window
 
 
 def _step_kernels(dm: DiscreteModel, engine: _Engine, full: _Stencil,
@@ -267,6 +325,29 @@ def _step_kernels(dm: DiscreteModel, engine: _Engine, full: _Stencil,
                "F⁻L_d: momenta at the first r nodes from the 2r−1 elements after them",
                half.definitions),
     ]
+
+
+def step_jacobian(dm: DiscreteModel) -> tuple[sp.Matrix, _Stencil]:
+    """The matrix that must be invertible for the step map to exist (paper §4.3), with the
+    stencil whose symbols it uses.
+
+    Unconstrained: ∂R/∂f_{K−1} of the residual at the middle node of 2r elements (D₁₂L_d,
+    resp. D₁₃L_d, on the pair groupoid). Constrained: the bordered matrix
+    [[∂R/∂f_{K−1}, ∂R/∂λ^r], [∂Φ_d/∂f_{K−1}, 0]] of the last element and the last window's
+    multipliers λ^r, Φ_d on that window.
+    """
+    engine, r = _Engine(dm), dm.order
+    constrained = bool(dm.constraints)
+    full = _stencil(dm, 2 * r, windows=r + 1 if constrained else 0)
+    residual = engine.variation(full, r, range(r + 1))
+    unknown = full.fs[-1]
+    J = residual.jacobian(unknown)
+    if constrained:
+        phi = engine.window_values(full, r, dm.constraints)
+        J = sp.Matrix.vstack(sp.Matrix.hstack(J, residual.jacobian(full.multipliers[r])),
+                             sp.Matrix.hstack(phi.jacobian(unknown),
+                                              sp.zeros(len(phi), len(phi))))
+    return J, full
 
 
 def _energy(dm: DiscreteModel, Ld: sp.Expr, f: Sequence[sp.Symbol]) -> sp.Expr:
@@ -314,5 +395,7 @@ def derive(dm: DiscreteModel) -> DerivedModel:
                         has_energy=dm.order == 1, fingerprint=dm.fingerprint,
                         constraint_count=len(dm.constraints), control_count=len(dm.controls),
                         step_scaled=tuple(g.step_scaled()),
+                        symmetries=tuple(z.name for z in dm.symmetries)
+                        if any(k.name == "noether" for k in kernels) else (),
                         c_context=g.c_context(),
                         coefficients=tuple(sorted(coefficients, key=lambda c: c.__name__)))

@@ -86,6 +86,8 @@ class DiscreteModel:
     multipliers: tuple[sp.Symbol, ...] = ()
     #: Controls at a window's quadrature point (slot coordinates).
     controls: tuple[sp.Expr, ...] = ()
+    #: Declared Noether symmetries (:class:`symvi.symmetry.Symmetry`, base coordinates).
+    symmetries: tuple = ()
 
 
 def slot_symbols(groupoid: Groupoid, order: int) -> tuple[Slot, ...]:
@@ -116,4 +118,5 @@ def discretise(model: "Model") -> DiscreteModel:
                          defaults=model.parameter_defaults,
                          continuous_lagrangian=model.lagrangian,
                          fingerprint=model.fingerprint(), constraints=constraints,
-                         multipliers=multipliers, controls=controls)
+                         multipliers=multipliers, controls=controls,
+                         symmetries=tuple(model.symmetries))

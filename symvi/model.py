@@ -20,6 +20,7 @@ from .discretise import RULES, h, rule_names
 from .errors import ModelError
 from .groupoids.base import Groupoid
 from .rank import generic_rank
+from .symmetry import Symmetry
 
 @dataclass(frozen=True)
 class Example:
@@ -115,7 +116,11 @@ class Model:
     controls:
         Continuous expressions evaluated at each window's quadrature point and returned
         by ``solve_bvp`` (an optimal-control problem's u = EL(L)_a; see
-        :class:`symvi.control.OptimalControl`).
+        :func:`symvi.optimal_control`).
+    symmetries:
+        Noether symmetries (:class:`symvi.symmetry.Symmetry`): their conserved quantities
+        F_Z are compiled (``StepResult.noether``) and ``symvi check`` verifies the
+        invariance (paper §4.4).
     """
 
     name: str
@@ -129,6 +134,7 @@ class Model:
     description: str = ""
     constraints: Sequence[Any] = ()
     controls: Sequence[Any] = ()
+    symmetries: Sequence[Symmetry] = ()
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.isidentifier() \
@@ -145,6 +151,7 @@ class Model:
         else:
             self._validate_discrete()
             self._validate_extras()
+        self._validate_symmetries()
         self._validate_example()
 
     # -- validation -------------------------------------------------------------------
@@ -256,6 +263,29 @@ class Model:
             raise ModelError("controls are evaluated at the quadrature point of a continuous "
                              "Lagrangian's discretisation; give `lagrangian`")
 
+    def _validate_symmetries(self) -> None:
+        """Sections in the base coordinates, one coefficient per fibre direction."""
+        symmetries = tuple(self.symmetries)
+        object.__setattr__(self, "symmetries", symmetries)
+        if not symmetries:
+            return
+        base = list(self.groupoid.algebroid().q) + list(self.parameter_symbols)
+        element = base if self.order == 1 else \
+            list(self.groupoid.discrete_symbols(1)) + [h] + list(self.parameter_symbols)
+        names = [z.name for z in symmetries if isinstance(z, Symmetry)]
+        if len(names) != len(symmetries):
+            raise ModelError("symmetries must be symvi.Symmetry objects")
+        if len(set(names)) != len(names) or not all(n.isidentifier() for n in names):
+            raise ModelError(f"symmetry names {names} must be distinct identifiers")
+        n = self.groupoid.fibre_dim
+        for z in symmetries:
+            if len(z.section) != n:
+                raise ModelError(f"symmetry {z.name!r}: the section has {len(z.section)} "
+                                 f"coefficients, the groupoid has {n} fibre directions")
+            for a, c in enumerate(z.section):
+                self._check_symbols(c, base, f"symmetry {z.name!r}, coefficient {a}")
+            self._check_symbols(z.potential, element, f"symmetry {z.name!r}, potential")
+
     def _validate_example(self) -> None:
         if self.example is None or self.example.initial is None:
             return
@@ -270,6 +300,7 @@ class Model:
         body = self.lagrangian if self.lagrangian is not None else self.discrete_lagrangian
         params = ";".join(f"{s}={v!r}" for s, v in self.parameters)
         extras = [sp.srepr(e) for e in self.constraints] + ["|"] \
-            + [sp.srepr(e) for e in self.controls]
+            + [sp.srepr(e) for e in self.controls] + ["|"] \
+            + [f"{z.name}:{sp.srepr(z.section)}:{sp.srepr(z.potential)}" for z in self.symmetries]
         return "\n".join([self.name, self.groupoid.fingerprint(), str(self.discretisation),
                           str(self.order), sp.srepr(body), params] + extras)

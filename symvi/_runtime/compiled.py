@@ -100,6 +100,13 @@ class CompiledModel:
         states = np.concatenate([minus, plus])
         return states[:, 0, :] if r == 1 else states
 
+    def noether(self, x: np.ndarray, f: np.ndarray, h: float, params=None) -> np.ndarray | None:
+        """Conserved quantities F_Z of the declared symmetries (paper §4.4) at nodes
+        r−1, r, …, one column per name in ``info["symmetries"]``; None without symmetries."""
+        if not self.info.get("symmetries"):
+            return None
+        return self.along("noether", x, f, h, params)
+
     def integrate(self, initial, n_steps: int, h: float, params=None, **options):
         """Step the discrete Euler–Lagrange equations; see :func:`stepping.integrate`."""
         if self.constraints:

@@ -48,6 +48,8 @@ class StepResult(_Checkable):
         Evaluated in C on first access.
     energy : (E,) discrete energy −∂L_d/∂h per element (first-order models), else None.
         Evaluated in C on first access.
+    noether : (E−2r+2, s) conserved quantities F_Z of the model's declared symmetries at
+        nodes r−1, r, … (paper §4.4), one column per symmetry, else None.
     newton_iterations : (steps,) Newton iterations of each computed step.
     status, success, message : outcome; on failure the arrays hold the path up to the
         failing step.
@@ -73,6 +75,10 @@ class StepResult(_Checkable):
     @cached_property
     def energy(self) -> np.ndarray | None:
         return self.along("energy")
+
+    @cached_property
+    def noether(self) -> np.ndarray | None:
+        return self.along("noether")
 
     @property
     def q(self) -> np.ndarray:

@@ -62,6 +62,8 @@ def integrate(model, initial, n_steps: int, h: float, params=None, *, maxiter: i
     def along(quantity: str):
         if quantity == "momenta":
             return model.momenta(x, f, h, params)
+        if quantity == "noether":
+            return model.noether(x, f, h, params)
         if model.info["has_energy"]:
             return model.along("energy", x, f, h, params)[:, 0]
         return None

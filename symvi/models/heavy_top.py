@@ -8,7 +8,7 @@ the momentum about the vertical Γ·Π (discrete Noether, exact), bounded energy
 """
 import sympy as sp
 
-from symvi import SO3, ActionGroupoid, Example, Model
+from symvi import SO3, ActionGroupoid, Example, Model, Symmetry
 
 
 def build(retraction: str = "cayley") -> Model:
@@ -22,6 +22,7 @@ def build(retraction: str = "cayley") -> Model:
     return Model(
         name=f"heavy_top{suffix}", groupoid=G,
         lagrangian=(Omega.T * inertia * Omega)[0] / 2 - mgl * chi.dot(Gamma),
+        symmetries=[Symmetry("vertical_momentum", G.q)],
         parameters={I1: 1.0, I2: 2.0, I3: 3.0, mgl: 1.0,
                     chi[0]: 0.6, chi[1]: 0.0, chi[2]: 0.8},
         example=Example(initial=([0.0, 0.6, 0.8], [[0.5, 0.3, 2.0]]), h=0.01, n_steps=10_000),

@@ -9,7 +9,7 @@ the angular momentum about the vertical Γ·Π, bounded energy error.
 """
 import sympy as sp
 
-from symvi import SO3, ActionGroupoid, Example, Model
+from symvi import SO3, ActionGroupoid, Example, Model, Symmetry
 
 
 def build(retraction: str = "cayley") -> Model:
@@ -21,6 +21,7 @@ def build(retraction: str = "cayley") -> Model:
     return Model(
         name=f"spherical_pendulum{suffix}", groupoid=G,
         lagrangian=m * l**2 * (w[0]**2 + w[1]**2) / 2 + J * w[2]**2 / 2 + m * g * l * Gamma[2],
+        symmetries=[Symmetry("vertical_momentum", G.q)],
         parameters={m: 1.0, l: 1.0, g: 9.81, J: 1.0},
         example=Example(initial=([0.0, 0.6, -0.8], [[1.0, 0.5, 0.0]]), h=0.01,
                         n_steps=10_000),
