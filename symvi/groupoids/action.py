@@ -148,6 +148,21 @@ class ActionGroupoid(Groupoid):
     def predictor(self, xs, fs):
         return self.group.predictor(xs, fs)
 
+    # Structure maps (paper §2.1): ε(q) = (q, e), (q, w)(q·w, w') = (q, ww'),
+    # (q, w)⁻¹ = (q·w, w⁻¹), with the group's own maps on ξ; σ_a(ε) = (q, τ(εE_a)).
+    def identity(self, x):
+        return tuple(x), self.group.identity(())[1]
+
+    def multiply(self, x, f, x2, f2, h):
+        return tuple(x), self.group.multiply((), f, (), f2, h)[1]
+
+    def inverse(self, x, f, h):
+        W = self.group.group_element([h * v for v in f])
+        return tuple(self.act(x, W)), self.group.inverse((), f, h)[1]
+
+    def basis_curve(self, x, a, eps, h):
+        return tuple(x), self.group.basis_curve((), a, eps, h)[1]
+
     def algebroid(self) -> Algebroid:
         """The action algebroid Q×𝔥: anchor the infinitesimal action, structure
         functions the group's constants (paper §3.3.5)."""

@@ -158,6 +158,31 @@ class Groupoid(ABC):
         """The Lie algebroid AG in coordinates (optimal control, paper §3.3)."""
         raise NotImplementedError(f"{self!r} does not describe its Lie algebroid")
 
+    # -- structure maps in element coordinates (paper §2.1) -----------------------------
+    # Used only by ``symvi check`` (check "routes"), which rebuilds the invariant fields
+    # X⃖_a, X⃗_a by differentiating these maps, independently of ``right``/``left``. Each
+    # takes and returns coordinates (x, f) as tuples of SymPy numbers or expressions.
+    def identity(self, x: Sequence[sp.Expr]) -> tuple[tuple, tuple]:
+        """Coordinates (x, f) of the identity ε(x) at the base point x."""
+        raise NotImplementedError(f"{self!r} does not give its structure maps")
+
+    def multiply(self, x: Sequence[sp.Expr], f: Sequence[sp.Expr], x2: Sequence[sp.Expr],
+                 f2: Sequence[sp.Expr], h: sp.Expr) -> tuple[tuple, tuple]:
+        """Coordinates of m(g, g') = g·g' for a composable pair g = (x, f), g' = (x2, f2)
+        (β(g) = α(g') = x2; not checked)."""
+        raise NotImplementedError(f"{self!r} does not give its structure maps")
+
+    def inverse(self, x: Sequence[sp.Expr], f: Sequence[sp.Expr],
+                h: sp.Expr) -> tuple[tuple, tuple]:
+        """Coordinates of i(g) = g⁻¹; its source is β(g)."""
+        raise NotImplementedError(f"{self!r} does not give its structure maps")
+
+    def basis_curve(self, x: Sequence[sp.Expr], a: int, eps: sp.Expr,
+                    h: sp.Expr) -> tuple[tuple, tuple]:
+        """Coordinates of σ_a(ε): a curve in the α-fibre of x through ε(x) whose tangent at
+        ε = 0 is the basis section e_a of the algebroid (the σ_a of DESIGN.md §2)."""
+        raise NotImplementedError(f"{self!r} does not give its structure maps")
+
     def move(self, x: Sequence[sp.Expr], eta: Sequence[sp.Expr]) -> tuple[sp.Expr, ...]:
         """Base point of a node after the variation g → g·τ(η) of the elements meeting
         there (the whole-trajectory update; pair groupoid: x + η)."""

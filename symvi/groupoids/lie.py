@@ -20,6 +20,7 @@ from __future__ import annotations
 from functools import cached_property
 from typing import Sequence
 
+import mpmath
 import numpy as np
 import sympy as sp
 
@@ -154,6 +155,46 @@ class MatrixLieGroup(Groupoid):
         """τ(X) as a matrix."""
         return self.retraction.matrix(x)
 
+    # -- structure maps (paper §2.1), for ``symvi check`` ---------------------------------
+    # Computed from the definition of the retraction, not from :mod:`.retraction`'s closed
+    # forms or dτ⁻¹: Cayley by a linear solve (any entries, meant for numbers: symbolic
+    # entries give large expressions), the exponential numerically with mpmath's expm/logm
+    # at the current ``mpmath.mp.dps`` (numeric entries only).
+    def group_element(self, x) -> sp.Matrix:
+        """τ(X), X = Σ x_a E_a: (I − X/2)⁻¹(I + X/2) or exp(X)."""
+        X, eye = self.hat(x), sp.eye(self.matrix_dim)
+        if self.retraction.name == "cayley":
+            return (eye - X / 2).LUsolve(eye + X / 2)
+        if self.retraction.name == "exp" and _numeric(X):
+            return _from_mp(mpmath.expm(_to_mp(X)))
+        return self.retraction.matrix(x)
+
+    def algebra_coordinates(self, W) -> tuple:
+        """Coordinates of τ⁻¹(W) in the basis: 2(W + I)⁻¹(W − I) or log(W) (principal)."""
+        W, eye = sp.Matrix(W), sp.eye(self.matrix_dim)
+        if self.retraction.name == "cayley":
+            X = 2 * (W + eye).LUsolve(W - eye)
+        elif self.retraction.name == "exp" and _numeric(W):
+            X = _from_mp(mpmath.logm(_to_mp(W)))
+        else:
+            raise NotImplementedError(f"{self!r}: no τ⁻¹ for symbolic matrices")
+        return tuple(self.coordinates(X))
+
+    def identity(self, x):
+        return (), (sp.S.Zero,) * self.fibre_dim
+
+    def multiply(self, x, f, x2, f2, h):
+        W = self.group_element([h * v for v in f]) * self.group_element([h * v for v in f2])
+        return (), tuple(v / h for v in self.algebra_coordinates(W))
+
+    def inverse(self, x, f, h):
+        W = self.group_element([h * v for v in f])
+        return (), tuple(v / h for v in self.algebra_coordinates(W.inv()))
+
+    def basis_curve(self, x, a, eps, h):
+        """σ_a(ε) = τ(εE_a), whose coordinate is ξ = τ⁻¹(τ(εE_a))/h = ε e_a / h."""
+        return (), tuple(eps / h if i == a else sp.S.Zero for i in range(self.fibre_dim))
+
     # -- groupoid interface ---------------------------------------------------------------
     @property
     def source_dim(self) -> int:
@@ -227,6 +268,22 @@ class MatrixLieGroup(Groupoid):
         return {"configuration_dim": self.matrix_dim ** 2, "groups": [self.group_context()],
                 "factors": [{"kind": "group", "group": 0, "f_offset": 0,
                              "dim": self.fibre_dim}]}
+
+
+def _numeric(M: sp.Matrix) -> bool:
+    return all(v.is_number for v in M)
+
+
+def _to_mp(M: sp.Matrix):
+    return mpmath.matrix([[mpmath.mpf(sp.Float(sp.N(v, mpmath.mp.dps), mpmath.mp.dps)._mpf_)
+                           for v in M.row(i)] for i in range(M.rows)])
+
+
+def _from_mp(M) -> sp.Matrix:
+    """Back to SymPy Floats; the real part (logm of a real matrix may come back complex
+    with imaginary parts at round-off)."""
+    return sp.Matrix(M.rows, M.cols,
+                     lambda i, j: sp.Float(mpmath.re(M[i, j]), mpmath.mp.dps))
 
 
 def _hat3(v):

@@ -116,6 +116,20 @@ class PairGroupoid(Groupoid):
         n = self.fibre_dim
         return sp.Matrix.vstack(sp.eye(n), sp.zeros(n, n))
 
+    # Structure maps (paper §2.1): ε(q) = (q, q), (q₀, q₁)(q₁, q₂) = (q₀, q₂),
+    # (q₀, q₁)⁻¹ = (q₁, q₀); σ_a(ε) = (q, q + ε e_a).
+    def identity(self, x):
+        return tuple(x), tuple(x)
+
+    def multiply(self, x, f, x2, f2, h):
+        return tuple(x), tuple(f2)
+
+    def inverse(self, x, f, h):
+        return tuple(f), tuple(x)
+
+    def basis_curve(self, x, a, eps, h):
+        return tuple(x), tuple(v + eps if i == a else v for i, v in enumerate(x))
+
     def algebroid(self) -> Algebroid:
         """TQ: y = q̇, anchor the identity, no structure functions."""
         n = self.fibre_dim

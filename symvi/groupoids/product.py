@@ -58,6 +58,31 @@ class ProductGroupoid(Groupoid):
             mo, no = mo + m, no + n
         return out
 
+    # -- structure maps, blockwise (a basis section e_a is one factor's) -----------------
+    def _join(self, parts) -> tuple[tuple, tuple]:
+        return (tuple(v for x, _ in parts for v in x), tuple(v for _, f in parts for v in f))
+
+    def identity(self, x):
+        return self._join([F.identity(xi) for F, xi in zip(self.factors, self._split(x, self._m))])
+
+    def multiply(self, x, f, x2, f2, h):
+        return self._join([F.multiply(*args, h) for F, *args in zip(
+            self.factors, self._split(x, self._m), self._split(f, self._n),
+            self._split(x2, self._m), self._split(f2, self._n))])
+
+    def inverse(self, x, f, h):
+        return self._join([F.inverse(xi, fi, h) for F, xi, fi in zip(
+            self.factors, self._split(x, self._m), self._split(f, self._n))])
+
+    def basis_curve(self, x, a, eps, h):
+        parts, offset = [], 0
+        for F, xi in zip(self.factors, self._split(x, self._m)):
+            local = a - offset
+            parts.append(F.basis_curve(xi, local, eps, h) if 0 <= local < F.fibre_dim
+                         else F.identity(xi))
+            offset += F.fibre_dim
+        return self._join(parts)
+
     # -- groupoid interface -------------------------------------------------------------
     @property
     def source_dim(self) -> int:
