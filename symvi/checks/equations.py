@@ -1,6 +1,365 @@
-"""Placeholder: check equations is being written (issue 5)."""
+"""Check ``equations``: are hand-derived equations the ones symvi derives? (issue 5, item 7)
+
+A user hands over equations — their own, or copied from a paper — as
+:class:`HandDerived` objects, each naming the derived object it claims to reproduce (its
+``target``). :func:`compare` decides, and says where they differ:
+
+* ``mode="equations"`` (controlled equations, constraints, discrete constraints, the
+  discrete Euler–Lagrange residual): equivalence *modulo rescaling and recombination* —
+  the same solution set. Every hand equation is first paired with the derived equation it
+  matches best, up to a factor free of the variables; if that does not settle it, the
+  derived system is solved for unknowns in which it is linear (controls, highest
+  derivatives, the last slot's coordinates) and the solution substituted into the hand
+  equations, which must then vanish and determine the same unknowns.
+* ``mode="value"`` (Lagrangians, the target map): the expressions must be equal; a factor
+  (``hand = derived × 1/h``) or increments scaled by h are named as such.
+
+A mismatch is located by the terms that differ, grouped by the parameters they carry and
+written in the user's own symbols: ``I3bar*Omega2*Omega3_dot where I3bar*Omega2*Omega3 is
+right``, ``missing -J2*Omega3*theta2_dot``, ``-P1*Omega2*Omega3 where
+-(I2 - I3)*Omega2*Omega3/I1 is right (reciprocal coefficient) [P1 = I1/(I2 - I3)]``.
+Symbols are matched by *name*, so hand equations need no access to symvi's objects; a
+symbol that names nothing is reported as undefined. The paper's displays are shipped as
+fixtures (:mod:`symvi.fixtures`), where this check reproduces ``ERRATA.md``.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any, Mapping, Sequence
+
+import sympy as sp
+
+from ..discretise import DiscreteModel
+from ..errors import ModelError
+from .equivalence import (CONTINUOUS, Hand, Space, coefficient_note, in_controls, is_zero,
+                          limit_note, linear_unknowns, matrix_rank, scaled_increments, show,
+                          solve_linear, symbol_space)
 from .report import CheckResult
 
+NAME = "equations"
 
-def run(ctx):
-    return CheckResult.skipped("equations", "not written yet")
+#: target → the derived object it names (paper reference).
+TARGETS: dict[str, str] = {
+    "controls": "controlled equations u_a = EL(L)_a, the model's controls (§3.3, eq. costLtilde)",
+    "constraints": "unactuated equations Φ^A = EL(L)_A = 0, the model's constraints (§3.3.2)",
+    "lagrangian": "continuous Lagrangian L̃ = C(q, y, EL(L)_a) (eq. costLtilde, LagCont)",
+    "discrete_lagrangian": "L_d on one window (DESIGN.md §3, eq. sdfinal)",
+    "discrete_constraints": "Φ^A_d = h Σ w Φ^A(point) on one window (§3.2, eq. constrainedso)",
+    "target_map": "target β(g) of one element (action groupoid: φ(q, τ(hξ)))",
+    "residual": "discrete Euler–Lagrange / Euler–Poincaré residual at a stencil's middle node "
+                "(§2.2, eq. delelg)",
+}
+_VALUE_ONLY = ("lagrangian", "discrete_lagrangian", "target_map")
+
+
+@dataclass(frozen=True, eq=False)
+class HandDerived:
+    """Hand-derived equations (or expressions) claimed to reproduce one derived object.
+
+    Parameters
+    ----------
+    name:
+        Where they come from (``"paper eq. CuerpoRigido"``); failures are located by it.
+    target:
+        Which derived object they claim to be (:data:`TARGETS`).
+    expressions:
+        The hand equations: expressions meaning ``= 0``, ``sympy.Eq`` or a Matrix of them
+        (``mode="equations"``), or the claimed values (``mode="value"``, one per derived
+        expression, in order).
+    symbols:
+        The user's own symbols (names or Symbols) → expressions in the model's symbols,
+        e.g. ``{"u1": tau1/I1, "P1": I1/(I2 - I3), "xi1[k]": "Omega1_0"}``; values may use
+        other keys. Symbols are matched by name. Model symbols: continuous targets use the
+        groupoid's continuous symbols (``Omega1``, ``Omega1_dot``, ``theta1_ddot``, …),
+        the parameters and the control symbols ``controls``; discrete targets and
+        ``target_map`` the groupoid's discrete symbols of one window
+        (``groupoid.discrete_symbols(order)``: ``Omega1_0``, ``Omega1_1`` the ξ of its two
+        elements, ``theta1_0 … theta1_2`` the pair nodes, ``Gamma1`` the first base point)
+        plus ``Gamma1_j`` for the base point at node j, the parameters and ``h``;
+        ``residual`` the discrete symbols of the 2r elements of its stencil.
+    mode:
+        ``"equations"`` (same solution set) or ``"value"`` (equal); default ``"value"``
+        for Lagrangians and the target map, ``"equations"`` otherwise.
+    labels:
+        A name per expression (default ``eq. 1``, ``eq. 2``, …).
+    select:
+        Indices of the derived expressions compared (default all), e.g. the first three
+        coordinates of the target map.
+    controls:
+        Names of the symbols standing for the model's controls (default ``u1 … um``): in
+        ``"controls"`` they are the unknowns of EL(L)_a − u_a = 0, elsewhere a hand
+        expression in them is compared with the derived one written in them.
+    unknowns:
+        Unknowns to solve the derived equations for (default: chosen automatically).
+    model:
+        The model these equations describe, when it is not the checked one.
+    """
+
+    name: str
+    target: str
+    expressions: Any
+    symbols: Mapping[Any, Any] = field(default_factory=dict)
+    mode: str | None = None
+    labels: Sequence[str] = ()
+    select: Sequence[int] | None = None
+    controls: Sequence[Any] = ()
+    unknowns: Sequence[Any] = ()
+    model: Any = None
+
+    def __post_init__(self) -> None:
+        if self.target not in TARGETS:
+            raise ValueError(f"{self.name}: unknown target {self.target!r}; targets: "
+                             f"{', '.join(TARGETS)}")
+        mode = self.mode or ("value" if self.target in _VALUE_ONLY else "equations")
+        if mode not in ("equations", "value"):
+            raise ValueError(f"{self.name}: mode must be 'equations' or 'value', got {mode!r}")
+        if mode == "equations" and self.target in _VALUE_ONLY:
+            raise ValueError(f"{self.name}: target {self.target!r} compares values; use "
+                             f"mode='value'")
+        exprs = self.expressions
+        if isinstance(exprs, (sp.Basic, str)) and not isinstance(exprs, sp.MatrixBase):
+            exprs = [exprs]
+        exprs = tuple(_as_expression(e) for e in list(exprs))
+        labels = tuple(self.labels) or tuple(f"eq. {i + 1}" for i in range(len(exprs)))
+        if len(labels) != len(exprs):
+            raise ValueError(f"{self.name}: {len(labels)} labels for {len(exprs)} expressions")
+        symbols = {_name(k): sp.sympify(v) for k, v in dict(self.symbols).items()}
+        object.__setattr__(self, "mode", mode)
+        object.__setattr__(self, "expressions", exprs)
+        object.__setattr__(self, "labels", labels)
+        object.__setattr__(self, "symbols", symbols)
+        object.__setattr__(self, "controls", tuple(_name(c) for c in self.controls))
+        object.__setattr__(self, "unknowns", tuple(_name(u) for u in self.unknowns))
+        if self.select is not None:
+            object.__setattr__(self, "select", tuple(int(i) for i in self.select))
+
+
+@dataclass(frozen=True)
+class EquationResult:
+    """One hand expression: ``ok``, and what it matched or where it differs."""
+
+    label: str
+    ok: bool
+    message: str
+
+    def to_dict(self) -> dict:
+        return {"label": self.label, "ok": self.ok, "message": self.message}
+
+
+@dataclass(frozen=True, eq=False)
+class Comparison:
+    """Outcome of :func:`compare`: per-expression results and a one-line summary."""
+
+    hand: HandDerived
+    ok: bool
+    summary: str
+    equations: tuple[EquationResult, ...] = ()
+    undefined: tuple[str, ...] = ()
+
+    def details(self) -> list[str]:
+        """One line per problem, each starting with the display's name (its location)."""
+        lines = [] if self.equations else [f"{self.hand.name}: {self.summary}"]
+        if self.undefined:
+            lines.append(f"{self.hand.name}: undefined symbol{'s' * (len(self.undefined) > 1)} "
+                         f"{', '.join(self.undefined)}")
+        lines += [f"{self.hand.name}, {r.label}: {r.message}" for r in self.equations if not r.ok]
+        if self.equations and not self.ok and all(r.ok for r in self.equations):
+            lines.append(f"{self.hand.name}: {self.summary}")
+        return lines
+
+    def to_dict(self) -> dict:
+        return {"name": self.hand.name, "target": self.hand.target, "mode": self.hand.mode,
+                "ok": self.ok, "summary": self.summary, "undefined": list(self.undefined),
+                "equations": [r.to_dict() for r in self.equations]}
+
+
+# -- helpers ------------------------------------------------------------------------------
+def _name(symbol) -> str:
+    return symbol if isinstance(symbol, str) else symbol.name
+
+
+def _as_expression(e) -> sp.Expr:
+    e = sp.sympify(e)
+    return e.lhs - e.rhs if isinstance(e, sp.Equality) else e
+
+
+# -- the comparison -----------------------------------------------------------------------
+def compare(hand: HandDerived, model=None, discrete: DiscreteModel | None = None,
+            derived=None) -> Comparison:
+    """Compare ``hand`` with the derived object it targets on ``model`` (``hand.model``
+    when given). ``discrete`` (``discretise(model)``) and ``derived`` (``derive(...)``) are
+    reused when passed."""
+    model = hand.model if hand.model is not None else model
+    if model is None:
+        raise ValueError(f"{hand.name}: no model to compare with")
+    try:
+        space = symbol_space(hand, model, discrete, derived)
+    except ModelError as exc:
+        return Comparison(hand, False, f"cannot compare with {hand.target}: {exc}")
+    derived_exprs = space.derived
+    if hand.select is not None:
+        bad = [i for i in hand.select if not 0 <= i < len(derived_exprs)]
+        if bad:
+            return Comparison(hand, False, f"select {bad} out of range: {hand.target} has "
+                                           f"{len(derived_exprs)} expressions")
+        derived_exprs = [derived_exprs[i] for i in hand.select]
+    resolved = Hand(hand, space)
+    controls = {c.name for c, _ in space.controls}
+    if hand.target != "controls" and space.controls and any(
+            s.name in controls for e in resolved.math for s in e.free_symbols):
+        rewritten = in_controls(space, derived_exprs)
+        if rewritten is not None:
+            derived_exprs = rewritten
+        else:
+            resolved.math = [e.xreplace(dict(space.controls)) for e in resolved.math]
+    if hand.mode == "value":
+        results = _compare_values(resolved, derived_exprs, hand)
+    else:
+        results = _compare_equations(resolved, derived_exprs, hand, space)
+    if isinstance(results, str):
+        return Comparison(hand, False, results, (), resolved.undefined)
+    ok = all(r.ok for r in results) and not resolved.undefined
+    wrong = [r.label for r in results if not r.ok]
+    if ok:
+        summary = f"agrees with the derived {hand.target}"
+    elif wrong:
+        summary = f"differs from the derived {hand.target} in {', '.join(wrong)}"
+    else:
+        summary = "uses undefined symbols"
+    return Comparison(hand, ok, summary, tuple(results), resolved.undefined)
+
+
+def _compare_values(hand: Hand, derived: list, spec: HandDerived):
+    """``mode="value"``: equal, equal up to a factor, or a note on where they differ; a
+    result string when the counts differ."""
+    if len(hand.math) != len(derived):
+        return (f"{len(hand.math)} hand expressions for {len(derived)} derived ones "
+                f"({spec.target})")
+    results = []
+    for i, (H, D) in enumerate(zip(hand.math, derived)):
+        label = spec.labels[i]
+        if is_zero(H - D):
+            results.append(EquationResult(label, True, "equal"))
+            continue
+        variables = set(hand.space.variables) | {s for s in H.free_symbols
+                                                  if s.name in hand.undefined}
+        ratio = sp.cancel(H / D) if D != 0 else sp.zoo
+        if ratio.is_finite is not False and ratio != 0 and not ratio.free_symbols & variables:
+            results.append(EquationResult(label, False, f"equal up to the factor "
+                                                        f"{show(ratio)}: hand = "
+                                                        f"{show(ratio)} × derived"))
+            continue
+        note = scaled_increments(H, D, hand.space) if spec.target != "target_map" else None
+        if note is None:
+            note = coefficient_note(hand, i, D)
+        if note is None and spec.target == "target_map":
+            note = limit_note(hand, H, D)
+        if note is None:
+            c, groups = hand.locate(i, D)
+            factor = "" if c in (None, 1) else f" (hand ≈ {show(c)} × derived)"
+            note = "differs" + factor + ": " + ("; ".join(groups) if groups else
+                                                f"hand − derived = {show(hand.show(H - D))}")
+        results.append(EquationResult(label, False, note))
+    return results
+
+
+def _pairing(hand: Hand, derived: list) -> list:
+    """Per hand expression, (j, c, differing groups) of the derived equation j it matches
+    best up to the factor c (fewest differing groups; its own index first), or None."""
+    n = len(derived)
+    pairing = []
+    for i in range(len(hand.math)):
+        best = None
+        for j in sorted(range(n), key=lambda j: j != i):
+            c, groups = hand.locate(i, derived[j])
+            if c is None:
+                continue
+            if best is None or len(groups) < len(best[2]):
+                best = (j, c, groups)
+        pairing.append(best)
+    return pairing
+
+
+def _compare_equations(hand: Hand, derived: list, spec: HandDerived, space: Space):
+    """``mode="equations"``: paired term by term, else by solving the derived system for
+    unknowns in which it is linear; a result string when the unknowns are not symbols."""
+    n = len(derived)
+    pairing = _pairing(hand, derived)
+
+    def matched(i):
+        j, c, _ = pairing[i]
+        return f"= derived eq. {j + 1}" + ("" if c == 1 else f" × {show(c)}")
+
+    exact = [p is not None and not p[2] and is_zero(
+        hand.math[i] - hand.bind(p[1]) * derived[p[0]]) for i, p in enumerate(pairing)]
+    if all(exact) and len({p[0] for p in pairing}) == n:
+        return [EquationResult(spec.labels[i], True, matched(i)) for i in range(len(pairing))]
+
+    def differs(i):
+        if pairing[i] is None:
+            return "matches no derived equation term by term"
+        j, c, groups = pairing[i]
+        scale = "" if c == 1 else f" × {show(c)}"
+        return f"vs derived eq. {j + 1}{scale}: " + "; ".join(groups or ["differs"])
+
+    names = spec.unknowns
+    if any(u not in space.names for u in names):
+        return f"unknowns {[u for u in names if u not in space.names]} are not model symbols"
+    unknowns = ([space.names[u] for u in names] if names else
+                linear_unknowns(derived, space.candidates, space.fixed))
+    if not unknowns or len(unknowns) != n:
+        results = [EquationResult(spec.labels[i], exact[i], matched(i) if exact[i]
+                                  else differs(i)) for i in range(len(pairing))]
+        if all(exact):
+            results.append(EquationResult("system", False, f"covers only "
+                                          f"{len({p[0] for p in pairing})} of the {n} derived "
+                                          f"equations"))
+        return results
+    solution = solve_linear(derived, unknowns)
+    results = []
+    for i, H in enumerate(hand.math):
+        residual = sp.cancel(sp.together(H.xreplace(solution)))
+        if is_zero(residual):
+            text = matched(i) if exact[i] else "a combination of the derived equations"
+            results.append(EquationResult(spec.labels[i], True, text))
+        else:
+            results.append(EquationResult(spec.labels[i], False, differs(i)))
+    if all(r.ok for r in results):
+        J = sp.Matrix(hand.math).jacobian(unknowns).xreplace(solution)
+        rank = matrix_rank(J, space.fixed)
+        if rank < n:
+            results.append(EquationResult(
+                "system", False, f"determines only {rank} of the {n} unknowns "
+                f"{', '.join(str(hand.show(u)) for u in unknowns)}: an equation is missing "
+                f"or two are dependent"))
+    return results
+
+
+# -- the check ----------------------------------------------------------------------------
+def run(ctx) -> CheckResult:
+    """Compare every hand-derived display of ``ctx.equations`` with symvi's derivation."""
+    if not ctx.equations:
+        return CheckResult.skipped(NAME, "no hand-derived equations given (a paper fixture "
+                                         "or a model file's `equations`)")
+    comparisons = []
+    for hand in ctx.equations:
+        if not isinstance(hand, HandDerived):
+            return CheckResult.failed(NAME, f"equations must be HandDerived objects, got "
+                                            f"{type(hand).__name__}")
+        own = hand.model is None or hand.model is ctx.model
+        discrete = ctx.discrete if own and hand.target not in CONTINUOUS else None
+        derived = ctx.derived if own and hand.target == "residual" else None
+        comparisons.append(compare(hand, ctx.model, discrete, derived))
+    data = {"comparisons": [c.to_dict() for c in comparisons]}
+    failed = [c for c in comparisons if not c.ok]
+    if not failed:
+        return CheckResult.passed(NAME, f"{len(comparisons)} hand-derived display(s) agree "
+                                        f"with the derivation", **data)
+    details = [line for c in failed for line in c.details()]
+    agreeing = [c.hand.name if c.ok else
+                f"{c.hand.name} ({', '.join(r.label for r in c.equations if r.ok)})"
+                for c in comparisons if c.ok or any(r.ok for r in c.equations)]
+    if agreeing:
+        details.append("agree: " + "; ".join(agreeing))
+    return CheckResult.failed(NAME, f"{len(failed)} of {len(comparisons)} hand-derived "
+                                    f"display(s) differ from the derivation", details, **data)

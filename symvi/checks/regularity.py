@@ -9,10 +9,13 @@ and the factors that can vanish are reported as the singular locus.
 """
 from __future__ import annotations
 
+from types import SimpleNamespace
+
 import numpy as np
 import sympy as sp
 
 from ..derive import step_jacobian
+from ..errors import ModelError
 from ..rank import generic_rank, sequential_lambdify
 from .noether import readable
 from .report import CheckResult
@@ -46,9 +49,26 @@ def _null_direction(J, st, fixed, names) -> str:
     return f"null direction of the step matrix: {' '.join(parts)} (σ_min/σ_max = {s[-1] / s[0]:.1e})"
 
 
+def _matrix(ctx):
+    """The step matrix and its stencil: the derived ``step`` kernel's Jacobian when the
+    derivation succeeds (shared with the other checks), else derived here."""
+    dm = ctx.discrete
+    if not dm.constraints:
+        try:
+            kernel = ctx.derived.kernel("step")
+        except ModelError:          # derive refuses singular models; measure it here
+            return step_jacobian(dm)
+        m, n, K = dm.groupoid.source_dim, dm.groupoid.fibre_dim, 2 * dm.order
+        x0 = kernel.z[:m]
+        fs = tuple(kernel.z[m + k * n:m + (k + 1) * n] for k in range(K))
+        stencil = SimpleNamespace(z=kernel.z, xs=(x0,) * K, fs=fs, definitions=kernel.definitions)
+        return dict(kernel.outputs)["jacobian"], stencil
+    return step_jacobian(dm)
+
+
 def run(ctx) -> CheckResult:
     dm = ctx.discrete
-    J, st = step_jacobian(dm)
+    J, st = _matrix(ctx)
     fixed = dict(zip(dm.parameters, dm.defaults)) | {dm.step: _STEP}
     n = J.shape[0]
     rank = generic_rank(J, st.z, fixed, definitions=st.definitions, seed=ctx.seed)

@@ -1,0 +1,439 @@
+"""The symbolic machinery of the check ``equations`` (:mod:`symvi.checks.equations`).
+
+A :class:`Space` holds the derived expressions of one target and the symbols hand
+expressions may use (the continuous symbols of §3.3, or one window's discrete symbols,
+DESIGN.md §3); a :class:`Hand` is a hand-derived display resolved against it, in the
+model's symbols and in the user's own. On these: the unknowns in which a derived system is
+linear and its solution (:func:`linear_unknowns`, :func:`solve_linear`), the terms in
+which a hand expression differs from a derived one, grouped by the parameters they carry
+(:meth:`Hand.locate`), and notes naming a recognisable mistake — increments ξ = τ⁻¹(w)/h
+mis-scaled (:func:`scaled_increments`), named constants with the wrong value
+(:func:`coefficient_note`), a target map that does not tend to the identity as h → 0
+(:func:`limit_note`).
+"""
+from __future__ import annotations
+
+from collections import Counter
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Mapping
+
+import sympy as sp
+
+from ..discretise import DiscreteModel, discretise, h as STEP
+from ..errors import ModelError
+from ..rank import generic_rank
+
+if TYPE_CHECKING:
+    from .equations import HandDerived
+
+#: Targets compared in the continuous symbols (the others on one window).
+CONTINUOUS = ("controls", "constraints", "lagrangian")
+_MAX_GROUPS = 8
+
+
+# -- symbols and expressions --------------------------------------------------------------
+def _plain(expr: sp.Expr) -> sp.Expr:
+    """Every symbol replaced by a plain Symbol of its name (symbols compare by name)."""
+    return expr.xreplace({s: sp.Symbol(s.name) for s in expr.free_symbols})
+
+
+def _substitute(expr: sp.Expr, table: Mapping[str, sp.Expr], depth: int = 12) -> sp.Expr:
+    """Replace symbols named in ``table`` (repeatedly: values may use other keys)."""
+    for _ in range(depth):
+        subs = {s: table[s.name] for s in expr.free_symbols
+                if s.name in table and table[s.name] != s}
+        if not subs:
+            return expr
+        expr = expr.xreplace(subs)
+    raise ValueError(f"the symbol mapping is circular around {sorted(map(str, subs))}")
+
+
+def is_zero(expr: sp.Expr) -> bool:
+    """Whether ``expr`` vanishes identically (cancelled; simplified if not rational)."""
+    e = sp.cancel(sp.together(expr))
+    if e == 0:
+        return True
+    if e.has(sp.Function, sp.Pow) and not e.is_rational_function():
+        return sp.simplify(e) == 0
+    return False
+
+
+def show(expr: sp.Expr) -> str:
+    """``expr`` as written in messages."""
+    return sp.sstr(expr)
+
+
+@dataclass
+class Space:
+    """The derived expressions of one target and the symbols hand expressions may use."""
+
+    derived: list
+    names: dict            # name → model symbol (for binding)
+    variables: list        # model symbols that are unknown quantities (not parameters, h)
+    display: dict          # model symbol → plain Symbol of its public name
+    candidates: list       # preferred unknowns of the equations mode, in order
+    scaled: list = field(default_factory=list)   # increments ξ = τ⁻¹(w)/h, per slot
+    controls: tuple = ()   # (control symbol, EL(L)_a) for continuous targets
+    leading: list = field(default_factory=list)
+    fixed: dict = field(default_factory=dict)    # parameter defaults and h for sampling
+
+
+def _window_names(groupoid, order, xs, fs) -> dict[str, sp.Symbol]:
+    """Public name → slot symbol: the groupoid's discrete symbols, plus ``<base>_<j>`` for
+    the base point of node j where the groupoid has no name for it (action groupoids)."""
+    names = {}
+    for public, value in groupoid.discrete_mapping(order, xs, fs).items():
+        if isinstance(value, sp.Symbol):
+            names.setdefault(public.name, value)
+    for i, x0 in enumerate(xs[0]):
+        base = next((n for n, v in names.items() if v == x0), None)
+        if base is None:
+            continue
+        stem = base[:-2] if base.endswith("_0") else base
+        names.setdefault(f"{stem}_0", x0)
+        for j in range(1, len(xs)):
+            if xs[j]:
+                names.setdefault(f"{stem}_{j}", xs[j][i])
+    return names
+
+
+def symbol_space(hand: HandDerived, model, discrete: DiscreteModel | None, derived) -> Space:
+    """The space of ``hand.target`` on ``model``: continuous symbols (§3.3) or one window's
+    discrete symbols (DESIGN.md §3). ``discrete`` and ``derived`` are reused when passed."""
+    params = {s.name: s for s in model.parameter_symbols}
+    fixed = dict(model.parameters) | {STEP: 0.1}
+    if hand.target in CONTINUOUS:
+        return _continuous_space(hand, model, params, fixed)
+    if hand.target == "residual":
+        exprs, names, slots, fs = _residual_window(model, discrete, derived)
+    else:
+        exprs, names, slots, fs = _window(hand.target, model, discrete)
+    public = {v: sp.Symbol(k) for k, v in reversed(list(names.items()))}
+    display = {s: public.get(s, sp.Symbol(s.name)) for s in slots}
+    scaled = [[v for v, s in zip(f, model.groupoid.step_scaled()) if s] for f in fs]
+    return Space(exprs, names | params | {"h": STEP}, slots, display, slots,
+                 scaled=scaled, fixed=fixed)
+
+
+def _continuous_space(hand: HandDerived, model, params: dict, fixed: dict) -> Space:
+    """Controls, constraints or L̃ in the continuous symbols and the control symbols."""
+    g, target = model.groupoid, hand.target
+    if model.lagrangian is None:
+        raise ModelError(f"model {model.name!r} has no continuous Lagrangian to compare "
+                         f"with")
+    count = len(model.controls)
+    names = hand.controls or tuple(f"u{a + 1}" for a in range(count))
+    if len(names) != count:
+        raise ModelError(f"{len(names)} control names for the {count} controls of "
+                         f"{model.name!r}")
+    c = tuple(sp.Symbol(n, real=True) for n in names)
+    cont = list(g.continuous_symbols(model.order))
+    leading = [s for s in g.leading_symbols(model.order) if s in cont]
+    exprs = {"controls": ([u - ci for ci, u in zip(c, model.controls)]
+                          if hand.mode == "equations" else list(model.controls)),
+             "constraints": list(model.constraints),
+             "lagrangian": [model.lagrangian]}[target]
+    if not exprs:
+        raise ModelError(f"model {model.name!r} has no {target}")
+    symbols = cont + list(c)
+    return Space(exprs, {s.name: s for s in symbols} | params, symbols,
+                 {s: sp.Symbol(s.name) for s in symbols},
+                 list(c) if target == "controls" else leading,
+                 controls=tuple(zip(c, model.controls)), leading=leading, fixed=fixed)
+
+
+def _residual_window(model, discrete, derived) -> tuple[list, dict, list, list]:
+    """(residual, names, slots, fibres) of the ``step`` kernel's stencil (§2.2)."""
+    g = model.groupoid
+    dk = derived if derived is not None else _derive(model, discrete)
+    try:
+        kernel = dk.kernel("step")
+    except StopIteration:
+        raise ModelError(f"model {model.name!r} has no step residual (constrained models "
+                         f"are solved as whole trajectories)") from None
+    residual = dict(kernel.outputs)["residual"]
+    for symbol, expr in reversed(kernel.definitions):
+        residual = residual.xreplace({symbol: expr})
+    m, n, K = g.source_dim, g.fibre_dim, 2 * dk.order
+    x0 = tuple(kernel.z[:m])
+    fs = [tuple(kernel.z[m + k * n:m + (k + 1) * n]) for k in range(K)]
+    names = _window_names(g, K, [x0] + [()] * (K - 1), fs)
+    slots = [v for f in reversed(fs) for v in f] + list(x0)
+    return list(residual), names, slots, fs
+
+
+def _window(target: str, model, discrete) -> tuple[list, dict, list, list]:
+    """(expressions, names, slots, fibres) of L_d, Φ_d or β on one window."""
+    g = model.groupoid
+    dm = discrete if discrete is not None else discretise(model)
+    xs, fs = [s[0] for s in dm.slots], [s[1] for s in dm.slots]
+    names = _window_names(g, dm.order, xs, fs)
+    slots = [v for j in reversed(range(dm.order)) for v in fs[j] + xs[j]]
+    if target == "target_map":
+        exprs = list(g.target(xs[0], fs[0], STEP))
+        if not exprs:
+            raise ModelError(f"the groupoid of {model.name!r} has no base: its target "
+                             f"map is empty")
+    else:
+        exprs = [dm.lagrangian] if target == "discrete_lagrangian" else list(dm.constraints)
+        if not exprs:
+            raise ModelError(f"model {model.name!r} has no discrete constraints")
+    return exprs, names, slots, fs
+
+
+def _derive(model, discrete):
+    from ..derive import derive
+    return derive(discrete if discrete is not None else discretise(model))
+
+
+# -- linear algebra on the derived system -------------------------------------------------
+def matrix_rank(matrix: sp.Matrix, fixed: dict) -> int:
+    """Generic rank of ``matrix`` at random points, ``fixed`` symbols at their values."""
+    free = sorted(matrix.free_symbols - set(fixed), key=str)
+    return generic_rank(matrix, free, {k: v for k, v in fixed.items()
+                                       if k in matrix.free_symbols}) or 0
+
+
+def linear_unknowns(exprs, candidates, fixed) -> list | None:
+    """Greedily, unknowns in which ``exprs`` are jointly linear with a generically
+    invertible Jacobian; None when no such set is found."""
+    exprs = [sp.expand(e) for e in exprs]
+    variables = set(candidates)
+
+    def simplicity(item):
+        """Prefer unknowns with constant coefficients in few equations (small solutions)."""
+        index, s = item
+        columns = [sp.diff(e, s) for e in exprs if e.has(s)]
+        return (sum(bool(c.free_symbols & variables) for c in columns), len(columns), index)
+
+    chosen, rank = [], 0
+    for _, s in sorted(enumerate(candidates), key=simplicity):
+        if not any(e.has(s) for e in exprs):
+            continue
+        trial = chosen + [s]
+        if any(sp.expand(sp.diff(e, s, t)) != 0 for e in exprs for t in trial):
+            continue
+        r = matrix_rank(sp.Matrix(exprs).jacobian(trial), fixed)
+        if r > rank:
+            chosen, rank = trial, r
+        if rank == len(exprs):
+            return chosen
+    return None
+
+
+def solve_linear(exprs, unknowns) -> dict:
+    """The unique solution of ``exprs = 0``, linear in ``unknowns``."""
+    (solution,) = sp.linsolve([sp.expand(e) for e in exprs], list(unknowns))
+    return {u: sp.cancel(v) for u, v in zip(unknowns, solution)}
+
+
+# -- locating differences -----------------------------------------------------------------
+def _split(expr: sp.Expr, variables) -> dict:
+    """Variable monomial → its coefficient (free of the variables)."""
+    out: dict = {}
+    for term in sp.Add.make_args(sp.expand(expr)):
+        coeff, mono = term.as_independent(*variables, as_Add=False)
+        out[mono] = out.get(mono, 0) + coeff
+    return out
+
+
+def _locate(own: sp.Expr, values: dict, derived: sp.Expr, coefficients: set,
+            parameters: set) -> tuple[Any, list[str]]:
+    """The factor c that best matches ``own`` (hand, user's symbols) to ``derived``
+    (display symbols) and the differing terms of own − c·derived, grouped by the
+    parameters they carry. ``values`` gives the coefficient symbols' values."""
+    variables = [s for s in own.free_symbols | derived.free_symbols
+                 if s.name not in coefficients | parameters | {"h"}]
+    H_own, D = _split(own, variables), _split(derived, variables)
+    H = {m: sp.cancel(a.xreplace(values)) for m, a in H_own.items()}
+    H = {m: a for m, a in H.items() if a != 0}
+    ratios = Counter(sp.cancel(H[m] / D[m]) for m in H if m in D and D[m] != 0)
+    if not ratios:
+        return None, []
+    c = ratios.most_common(1)[0][0]
+    keyed: dict = {}
+
+    def key(coeff):
+        return tuple(sorted(s.name for s in coeff.free_symbols if s.name in parameters))
+
+    def add(k, hand_own, hand_value, derived_part, whole=None):
+        group = keyed.setdefault(k, [sp.S.Zero, sp.S.Zero, sp.S.Zero, []])
+        group[0] += hand_own
+        group[1] += hand_value
+        group[2] += derived_part
+        if whole is not None:
+            group[3].append(whole)
+
+    for m in list(H) + [m for m in D if m not in H]:
+        a, b = H.get(m, sp.S.Zero), sp.cancel(c * D.get(m, sp.S.Zero))
+        if sp.cancel(a - b) == 0:
+            continue
+        own_term = H_own.get(m, sp.S.Zero) * m
+        if a != 0 and b != 0:
+            A, B = sp.Add.make_args(sp.expand(a)), sp.Add.make_args(sp.expand(b))
+            if set(A) & set(B):
+                for t in A:
+                    if t not in B:
+                        add(key(t), t * m, t * m, sp.S.Zero)
+                for t in B:
+                    if t not in A:
+                        add(key(t), sp.S.Zero, sp.S.Zero, t * m)
+                continue
+            add(key(a) or key(b), own_term, a * m, b * m, (a, b))
+        elif a != 0:
+            add(key(a), own_term, a * m, sp.S.Zero)
+        else:
+            add(key(b), sp.S.Zero, sp.S.Zero, b * m)
+    messages = [_describe(*group, coefficients, values) for group in keyed.values()]
+    if len(messages) > _MAX_GROUPS:
+        messages = messages[:_MAX_GROUPS] + [f"… and {len(messages) - _MAX_GROUPS} more"]
+    return c, messages
+
+
+def _describe(hand_own, hand_value, derived_part, wholes, coefficients: set,
+              values: dict) -> str:
+    """One group of differing terms: missing, spurious, or hand where derived is right."""
+    hand_txt, derived_txt = show(sp.factor(hand_own)), show(sp.factor(derived_part))
+    if hand_value == 0:
+        return f"missing {derived_txt}"
+    if derived_part == 0:
+        text = f"spurious {hand_txt}"
+    else:
+        text = f"{hand_txt} where {derived_txt} is right"
+        ratio = sp.cancel(hand_value / derived_part)
+        if ratio == -1:
+            text += " (wrong sign)"
+        elif len(wholes) == 1 and sp.cancel(wholes[0][0] * wholes[0][1] - 1) == 0:
+            text += " (reciprocal coefficient)"
+        elif ratio.is_number and ratio < 0:
+            text += f" (wrong sign, and {show(-ratio)} times the right size)"
+        elif ratio.is_number:
+            text += f" ({show(ratio)} times the right one)"
+    used = sorted(s.name for s in hand_own.free_symbols if s.name in coefficients)
+    if used:
+        text += " [" + ", ".join(f"{n} = {show(values[sp.Symbol(n)])}" for n in used) + "]"
+    return text
+
+
+# -- hand expressions against a space -----------------------------------------------------
+class Hand:
+    """A HandDerived resolved against a space: its expressions in model symbols (``math``)
+    and in the user's own symbols (``own``), and how to show derived ones in the latter."""
+
+    def __init__(self, hand: HandDerived, space: Space):
+        keys = hand.symbols
+        model_names = set(space.names)
+        variables = set(space.variables)
+        variable_names = {n for n, s in space.names.items() if s in variables}
+        # one display symbol per model symbol (Gamma1 and Gamma1_0 name the same node)
+        self.canon = {sp.Symbol(n): space.display[s] for n, s in space.names.items()
+                      if s in space.display}
+        resolved = {k: _plain(_substitute(v, keys)).xreplace(self.canon)
+                    for k, v in keys.items()}
+        self.coefficients, reverse, opaque = {}, {}, {}
+        for k, v in resolved.items():
+            free = [s for s in v.free_symbols if s.name in variable_names
+                    or s.name not in model_names]
+            if not free:
+                self.coefficients[sp.Symbol(k)] = v
+            elif len(free) == 1 and sp.diff(v, free[0], 2) == 0 \
+                    and not sp.diff(v, free[0]).has(*free) and free[0].name in variable_names:
+                s = free[0]
+                reverse.setdefault(s, sp.cancel((sp.Symbol(k) - v.xreplace({s: 0}))
+                                                / sp.diff(v, s)))
+            else:
+                opaque[k] = keys[k]
+        self.reverse = reverse
+        self.parameters = {n for n, s in space.names.items() if s not in space.variables}
+        self.own, self.math, undefined = [], [], set()
+        for e in hand.expressions:
+            own = _plain(_substitute(e, opaque)).xreplace(self.canon).xreplace(reverse)
+            self.own.append(own)
+            full = _plain(_substitute(e, keys))
+            undefined |= {s.name for s in full.free_symbols if s.name not in model_names}
+            self.math.append(full.xreplace({s: space.names[s.name] for s in full.free_symbols
+                                            if s.name in model_names}))
+        self.undefined = tuple(sorted(undefined))
+        self.space = space
+
+    def show(self, expr: sp.Expr) -> sp.Expr:
+        """A derived expression in the user's symbols where they invert, else public names."""
+        return _plain(expr.xreplace(self.space.display)).xreplace(self.reverse)
+
+    def bind(self, expr: sp.Expr) -> sp.Expr:
+        """A display-level expression (plain symbols) in the model's symbols."""
+        return expr.xreplace({s: self.space.names[s.name] for s in expr.free_symbols
+                              if s.name in self.space.names})
+
+    def locate(self, i: int, derived: sp.Expr):
+        """(factor c, differing term groups) of hand expression i against ``derived``."""
+        return _locate(self.own[i], self.coefficients, self.show(derived),
+                       {s.name for s in self.coefficients}, self.parameters)
+
+
+def in_controls(space: Space, exprs) -> list | None:
+    """The derived expressions with the controlled highest derivatives eliminated in favour
+    of the control symbols (L̃ = C(q, y, EL(L)_a) becomes C(q, y, u)); None if impossible."""
+    equations = [c - u for c, u in space.controls]
+    unknowns = linear_unknowns(equations, space.leading, space.fixed)
+    if unknowns is None:
+        return None
+    solution = solve_linear(equations, unknowns)
+    return [sp.cancel(e.xreplace(solution)) for e in exprs]
+
+
+# -- notes on recognisable mistakes -------------------------------------------------------
+def scaled_increments(H, D, space: Space) -> str | None:
+    """Increments ξ = τ⁻¹(w)/h mis-scaled (hand(ξ) = derived(s·ξ), s = h or 1/h), or a
+    window's (ξ_k, ξ_{k+1}) replaced by (ξ_{k+1/2}, ξ_{k,k+1}) — the rule applied twice."""
+    flat = [v for slot in space.scaled for v in slot]
+    if not flat:
+        return None
+    for s, text in ((STEP, "h·ξ = τ⁻¹(w)"), (1 / STEP, "ξ/h = τ⁻¹(w)/h²")):
+        if is_zero(H - D.xreplace({v: s * v for v in flat})):
+            return (f"hand = derived with every increment ξ = τ⁻¹(w)/h replaced by {text}: "
+                    f"its arguments are mis-scaled by {show(s)}")
+    if len(space.scaled) == 2:
+        twice = {a: (a + b) / 2 for a, b in zip(*space.scaled)} \
+            | {b: (b - a) / STEP for a, b in zip(*space.scaled)}
+        if is_zero(H - D.xreplace(twice)):
+            return ("hand = derived evaluated at (ξ_{k+1/2}, ξ_{k,k+1}) in place of "
+                    "(ξ_k, ξ_{k+1}): the midpoint and the difference quotient are taken twice")
+    return None
+
+
+def coefficient_note(hand: Hand, i: int, D) -> str | None:
+    """When the hand expression uses named constants (the paper's P_i): the values that
+    would make it agree, if any, against the ones it was given."""
+    own = hand.own[i]
+    keys = sorted((k for k in hand.coefficients if own.has(k)), key=str)
+    if not keys:
+        return None
+    variables = [s for s in own.free_symbols | hand.show(D).free_symbols
+                 if s not in keys and s.name not in hand.parameters]
+    conditions = [c for c in _split(own - hand.show(D), variables).values() if c != 0]
+    try:
+        solutions = sp.solve(conditions, keys, dict=True)
+    except NotImplementedError:
+        return None
+    if len(solutions) != 1 or set(solutions[0]) != set(keys):
+        return None
+    wrong = [k for k in keys if sp.cancel(solutions[0][k] - hand.coefficients[k]) != 0]
+    right = ", ".join(f"{k} = {show(sp.factor(solutions[0][k]))}" for k in wrong)
+    given = ", ".join(f"{k} = {show(hand.coefficients[k])}" for k in wrong)
+    return f"agrees if {right}; given {given}"
+
+
+def limit_note(hand: Hand, H, D) -> str | None:
+    """For maps that must tend to the identity as h → 0 (the target map)."""
+    try:
+        h0, d0 = (sp.cancel(e).xreplace({STEP: 0}) for e in (H, D))
+    except (ZeroDivisionError, ValueError):
+        return None
+    if h0.has(sp.zoo, sp.nan) or d0.has(sp.zoo, sp.nan) or is_zero(h0 - d0):
+        return None
+    first = sp.cancel(sp.diff(D, STEP).xreplace({STEP: 0}))
+    return (f"as h → 0 the hand value tends to {show(hand.show(h0))}, the derived one to "
+            f"{show(hand.show(d0))} (derived = {show(hand.show(d0))} + h·"
+            f"({show(hand.show(first))}) + O(h²)): the hand map is not consistent")
+
