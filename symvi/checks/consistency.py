@@ -1,6 +1,157 @@
-"""Placeholder: check consistency is being written (issue 5)."""
+"""Check ``consistency``: the order in h at which the discrete residual approximates the
+continuous equations (DESIGN.md §5; issue 5, item 3).
+
+The residual at the middle node of the derived stencil is expanded in h along a smooth
+curve (:mod:`symvi.consistency`: pair nodes q(t + jh), group increments ξ_i sampled at the
+middle of their element, action base points from β, multipliers at their window's middle
+node). It passes when its leading term is ±h^p·E with E the variational derivative of the
+action —
+
+* pair groupoid: E(L) = ∂L/∂q − d/dt ∂L/∂q̇ + d²/dt² ∂L/∂q̈;
+* Lie groups, action groupoids, products: E = −EL_r(L) on the Lie algebroid (Appendix C.2
+  for r = 1; the second-order operator EL₂ with P = ∂L̃/∂y − d/dt ∂L̃/∂ẏ for r = 2);
+* constrained (optimal-control) models: the residual of the augmented action with smooth
+  multipliers λ_A(t) against E(L̃ + λ_A Φ^A) (d/dt acting on λ, ERRATA item 8), *and* the
+  discrete constraints of one window against h·Φ —
+
+and reports p, the sign and the order (next power − leading power: the relative error of
+the residual as an approximation of h^p·E). A correct symmetric rule gives +h·E + O(h³),
+order 2. Otherwise it fails and names, per component, the leading coefficient, the
+expected one and their difference.
+
+Skipped: models declared with a discrete Lagrangian only (there is no continuous equation;
+:func:`symvi.consistency.check_consistency` takes a continuous reference model), groupoids
+the expansion cannot sample, and residuals with operations the series arithmetic does not
+support (the reason says which).
+"""
+from __future__ import annotations
+
+import time
+
+import sympy as sp
+
+from ..consistency import (ConsistencyReport, check_consistency, compact, component_names,
+                           unsupported)
+from ..errors import ModelError
 from .report import CheckResult
 
+NAME = "consistency"
 
-def run(ctx):
-    return CheckResult.skipped("consistency", "not written yet")
+_SAMPLING = {
+    "pair": "nodes q_j = q(t + jh)",
+    "lie": "increments ξ_i = y(t + (i + ½)h) (element midpoints)",
+    "action": "increments ξ_i = y(t + (i + ½)h), base points x_0 = q(t_0), x_{j+1} = "
+              "β(x_j, ξ_j)",
+    "product": "pair factors at nodes, group factors at element midpoints, base points "
+               "from β",
+}
+
+
+def _equation(model) -> str:
+    """What E is, in words."""
+    r, kind = model.order, model.groupoid.kind
+    if kind == "pair" and not model.constraints:
+        return ("E(L) = ∂L/∂q − d/dt ∂L/∂q̇" if r == 1
+                else "E(L) = ∂L/∂q − d/dt ∂L/∂q̇ + d²/dt² ∂L/∂q̈")
+    operator = "EL(L)" if r == 1 else "EL₂(L̃)"
+    if model.constraints:
+        operator = "EL₂(L̃ + λ_A Φ^A)"
+    where = {"pair": "on TQ",
+             "lie": "Euler–Poincaré" if r == 1 else "second-order Euler–Poincaré",
+             "action": "on the action algebroid",
+             "product": "on the product algebroid"}.get(kind, "on the Lie algebroid")
+    return f"E = −{operator} ({where})"
+
+
+def _term(sign: int | None, power: int | None, what: str = "E") -> str:
+    if power is None:
+        return "0"
+    s = "−" if sign == -1 else "+"
+    return f"{s}h^{power}·{what}"
+
+
+def _describe(part: ConsistencyReport) -> dict:
+    e = part.expansion
+    return {"power": part.power, "sign": part.sign, "order": part.order,
+            "next_power": e.next_power, "through": e.through}
+
+
+def _mismatch(part: ConsistencyReport, names, what: str, symbol: str) -> tuple[list, list]:
+    """(components, lines): the components whose leading coefficient is not ±(expected),
+    three lines each — the difference, the leading coefficient and the expected one."""
+    e = part.expansion
+    if e.leading is None:
+        return list(names), [f"{what}: every coefficient through h^{e.through} vanishes"]
+    sign, rows = e.compare(part.expected)
+    sign = sign or 1
+    s = "" if sign == 1 else "−"
+    t = e.time
+    lines = []
+    for i in rows:
+        lead, expected = e.leading[i], sign * part.expected[i]
+        difference = sp.expand(lead - expected)
+        lines.append(f"{what} component {names[i]} (row {i}): leading h^{e.leading_power} "
+                     f"coefficient minus {s}{symbol}_{i} = {compact(difference, t)}")
+        label = f"expected {s}{symbol}_{i}:"
+        lines.append(f"    leading coefficient: {compact(lead, t)}")
+        lines.append(f"    {label:21s}{compact(expected, t)}")
+    return [names[i] for i in rows], lines
+
+
+def run(ctx) -> CheckResult:
+    model = ctx.model
+    if model.lagrangian is None:
+        return CheckResult.skipped(
+            NAME, "declared with a discrete Lagrangian only: there is no continuous "
+                  "equation to compare with (symvi.consistency.check_consistency(model, "
+                  "lagrangian_model=reference) takes one)")
+    reason = unsupported(model.groupoid)
+    if reason is not None:
+        return CheckResult.skipped(NAME, reason)
+    derived = ctx.derived
+    start = time.perf_counter()
+    try:
+        report = check_consistency(model, derived=derived)
+    except ModelError as exc:
+        return CheckResult.skipped(NAME, f"cannot expand the residual in h: {exc}")
+    seconds = round(time.perf_counter() - start, 3)
+    names = component_names(model.groupoid)
+    e = report.expansion
+    sampling = _SAMPLING.get(model.groupoid.kind, "")
+    if model.constraints:
+        sampling += "; multipliers λ^w = λ(t_w) at their window's middle node"
+    data = {**_describe(report), "equation": _equation(model), "sampling": sampling,
+            "seconds": seconds}
+    tail = (f"O(h^{e.next_power})" if e.next_power is not None
+            else f"nothing further through h^{e.through}")
+    head = f"R = {_term(report.sign, report.power)} + {tail}"
+    constraint_text = ""
+    details: list[str] = []
+    problems: list[str] = []
+    if report.sign is None:
+        bad, lines = _mismatch(report, names, "residual", "E")
+        details += lines
+        problems.append(f"the residual vanishes through h^{e.through}" if report.power is None
+                        else f"the residual's leading term h^{report.power} is not "
+                             f"±h^{report.power}·E in {', '.join(bad)}")
+    if report.constraints is not None:
+        c = report.constraints
+        data["constraints"] = _describe(c)
+        ctail = (f"O(h^{c.expansion.next_power})" if c.expansion.next_power is not None
+                 else f"nothing further through h^{c.expansion.through}")
+        constraint_text = (f"; constraints Φ_d = {_term(c.sign, c.power, 'Φ')} + {ctail}"
+                           + (f" (order {c.order})" if c.order is not None else ""))
+        if c.sign is None:
+            bad, lines = _mismatch(c, [f"Φ{a}" for a in range(len(model.constraints))],
+                                   "constraint", "Φ")
+            details += lines
+            problems.append(f"the discrete constraints' leading term h^{c.power} is not "
+                            f"±h^{c.power}·Φ in {', '.join(bad)}")
+    if problems:
+        return CheckResult.failed(
+            NAME, f"inconsistent with {data['equation']}: {'; '.join(problems)}", details,
+            **data)
+    order = (f"order {report.order}" if report.order is not None
+             else f"order ≥ {e.through + 1 - report.power}")
+    return CheckResult.passed(
+        NAME, f"consistent: {head} ({order}), {data['equation']}{constraint_text}", **data)
