@@ -1,0 +1,327 @@
+"""Jets of smooth curves and the continuous Euler–Lagrange operators (DESIGN.md §5).
+
+Time derivatives are plain *jet* symbols until a result is reported, so the identities the
+consistency expansions (:mod:`symvi.consistency`) need are polynomial ones:
+
+* :class:`_Jets`: q^{(k)}(t) on the pair groupoid, with :func:`_variational_derivative`
+  E(L) = ∂L/∂q − d/dt ∂L/∂q̇ + d²/dt² ∂L/∂q̈;
+* :class:`_AlgebroidJets`: on a Lie algebroid, the base point q(t), the derivatives
+  y^{(k)}(t) of the fibre curve and of the multipliers λ_A(t); derivatives of q follow
+  from the anchor, q̇ = ρ(q) y;
+* :func:`euler_lagrange_algebroid`: the operator EL₁ of Appendix C.2 and its second-order
+  version EL₂ (paper eq. ``ecuacionesvakonomoalgebroides2``, times −1), with signs and
+  conventions as stated in :mod:`symvi.consistency`;
+* :func:`constraint_functions`, and how each groupoid's fibre is sampled along a curve
+  (:func:`unsupported`, :func:`component_names`).
+
+Results are reported as functions of t: base coordinates q_i(t), fibre coordinates y_α(t)
+and their derivatives (a pair factor's y^{(k)} as q^{(k+1)}).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import sympy as sp
+from sympy.core.function import AppliedUndef
+
+from .errors import ModelError
+from .model import Model
+from .series import _GENERATORS, _Poly, _generator
+
+#: Time variable of the continuous curve the nodes are sampled from.
+TIME = sp.Symbol("t", real=True)
+
+
+# --------------------------------------------------------------------------------------
+# Jets: q^{(k)}(t) as plain symbols
+# --------------------------------------------------------------------------------------
+@dataclass(frozen=True)
+class _Jets:
+    """Symbols J[c][k] standing for the k-th time derivative of coordinate c."""
+
+    names: tuple[str, ...]
+    depth: int
+    symbols: tuple[tuple[sp.Symbol, ...], ...]
+
+    @classmethod
+    def make(cls, names: Sequence[str], depth: int) -> "_Jets":
+        symbols = tuple(tuple(sp.Dummy(f"{n}_{k}", real=True) for k in range(depth + 1))
+                        for n in names)
+        return cls(tuple(names), depth, symbols)
+
+    def derivative(self, expr: sp.Expr) -> sp.Expr:
+        """Total time derivative d/dt of a jet expression."""
+        total = sp.Integer(0)
+        for column in self.symbols:
+            for k in range(self.depth):
+                total += sp.diff(expr, column[k]) * column[k + 1]
+        if expr.has(*(c[self.depth] for c in self.symbols)):
+            raise ModelError("jet depth too small for this time derivative")
+        return total
+
+    def to_functions(self, expr: sp.Expr, t: sp.Symbol) -> sp.Expr:
+        """Replace jets by derivatives of functions q_c(t)."""
+        mapping = {}
+        for name, column in zip(self.names, self.symbols):
+            q = sp.Function(name, real=True)(t)
+            for k, s in enumerate(column):
+                mapping[s] = q if k == 0 else sp.Derivative(q, (t, k))
+        return expr.xreplace(mapping)
+
+    def from_functions(self, expr, t: sp.Symbol):
+        """Inverse of :meth:`to_functions` (derivatives beyond the jet depth are kept)."""
+        columns = dict(zip(self.names, self.symbols))
+
+        def jet(name, k):
+            column = columns.get(name)
+            return column[k] if column is not None and k <= self.depth else None
+        return _replace_functions(expr, t, jet)
+
+
+def _replace_functions(expr, t: sp.Symbol, jet):
+    """Replace f(t) and its derivatives by ``jet(name of f, k)`` where that is not None
+    (functions are matched by name, whatever their assumptions)."""
+    expr = sp.sympify(expr)
+    mapping = {}
+    for d in expr.atoms(sp.Derivative):
+        if isinstance(d.expr, AppliedUndef) and d.expr.args == (t,) \
+                and all(v == t for v in d.variables):
+            value = jet(d.expr.func.__name__, d.derivative_count)
+            if value is not None:
+                mapping[d] = value
+    for f in expr.atoms(AppliedUndef):
+        if f.args == (t,):
+            value = jet(f.func.__name__, 0)
+            if value is not None:
+                mapping[f] = value
+    return expr.xreplace(mapping)
+
+
+def _variational_derivative(groupoid, lagrangian: sp.Expr, order: int, jets: _Jets) -> sp.Matrix:
+    levels = [tuple(groupoid.q), tuple(groupoid.qdot), tuple(groupoid.qddot)][: order + 1]
+    mapping = {s: jets.symbols[c][k] for k, level in enumerate(levels)
+               for c, s in enumerate(level)}
+    rows = []
+    for c in range(groupoid.fibre_dim):
+        row = sp.Integer(0)
+        for k, level in enumerate(levels):
+            term = sp.diff(lagrangian, level[c]).xreplace(mapping)
+            for _ in range(k):
+                term = jets.derivative(term)
+            row += (-1)**k * term
+        rows.append(sp.expand(row))
+    return sp.Matrix(rows)
+
+
+# --------------------------------------------------------------------------------------
+# Jets on a Lie algebroid: q(t), y^{(k)}(t) and multipliers λ^{(k)}(t) as plain symbols
+# --------------------------------------------------------------------------------------
+def _layout(groupoid) -> list[tuple[str, int | None]]:
+    """How each fibre coordinate of ``groupoid`` is sampled along a curve.
+
+    ``("node", i)``: a pair factor's fibre part is the target node, base coordinate i;
+    ``("mid", None)``: a group increment ξ, sampled at the middle of the element.
+    """
+    kind = groupoid.kind
+    if kind == "product":
+        out, offset = [], 0
+        for factor in groupoid.factors:
+            out += [(k, None if i is None else i + offset) for k, i in _layout(factor)]
+            offset += factor.source_dim
+        return out
+    if kind == "pair":
+        return [("node", i) for i in range(groupoid.fibre_dim)]
+    if kind in ("lie", "action"):
+        return [("mid", None)] * groupoid.fibre_dim
+    raise ModelError(f"consistency expansions do not know how to sample the fibre of a "
+                     f"{kind!r} groupoid along a curve")
+
+
+def unsupported(groupoid) -> str | None:
+    """Why the expansion cannot sample ``groupoid`` along a curve, or None if it can."""
+    try:
+        _layout(groupoid)
+    except ModelError as exc:
+        return str(exc)
+    return None
+
+
+def component_names(groupoid) -> tuple[str, ...]:
+    """Names of the residual's components (the fibre directions e_α): a pair factor's
+    coordinate names, a group factor's Lie algebra coordinates."""
+    if groupoid.kind == "pair":
+        return tuple(groupoid.names)
+    algebroid = groupoid.algebroid()
+    base = [str(s) for s in algebroid.q]
+    return tuple(base[i] if kind == "node" else str(y)
+                 for (kind, i), y in zip(_layout(groupoid), algebroid.y))
+
+
+class _AlgebroidJets:
+    """Jet symbols on the algebroid of ``groupoid``: the base point q (values only), the
+    derivatives y^{(k)} of the fibre curve (k ≤ depth) and of ``multipliers`` functions
+    λ_A; the total derivative uses q̇ = ρ(q) y."""
+
+    def __init__(self, groupoid, depth: int, multipliers: int = 0):
+        algebroid = groupoid.algebroid()
+        self.algebroid, self.depth = algebroid, depth
+        self.layout = _layout(groupoid)
+        if len(self.layout) != len(algebroid.y):
+            raise ModelError("the algebroid's rank differs from the groupoid's fibre dimension")
+        self.q = tuple(sp.Dummy(str(s), real=True) for s in algebroid.q)
+        self.y = tuple(tuple(sp.Dummy(f"{s}_{k}", real=True) for k in range(depth + 1))
+                       for s in algebroid.y)
+        self.lam = tuple(tuple(sp.Dummy(f"lambda{a}_{k}", real=True) for k in range(depth + 1))
+                         for a in range(multipliers))
+        base = dict(zip(algebroid.q, self.q))
+        self.anchor = algebroid.anchor.xreplace(base)
+        self.structure = tuple(C.xreplace(base) for C in algebroid.structure)
+        y0 = sp.Matrix([column[0] for column in self.y])
+        self.qdot = tuple(self.anchor * y0) if self.q else ()
+        self.base_names = tuple(str(s) for s in algebroid.q)
+        #: Function name and derivative shift of each fibre coordinate (a pair factor's
+        #: y^{(k)} is q^{(k+1)}).
+        self.fibre_functions = tuple((self.base_names[i], 1) if kind == "node" else (str(y), 0)
+                                     for (kind, i), y in zip(self.layout, algebroid.y))
+        self.multiplier_names = tuple(f"lambda{a}" for a in range(multipliers))
+        self._base_derivatives = [[s] for s in self.q]
+
+    def symbol_map(self) -> dict:
+        """The groupoid's continuous symbols (q, y, ẏ of the algebroid) → jets."""
+        a = self.algebroid
+        return dict(zip(a.q, self.q)) | {y: c[0] for y, c in zip(a.y, self.y)} \
+            | {v: c[1] for v, c in zip(a.ydot, self.y)}
+
+    def derivative(self, expr: sp.Expr) -> sp.Expr:
+        """Total time derivative: ∂/∂q · ρ(q) y + Σ_k ∂/∂y^{(k)} · y^{(k+1)} (and λ)."""
+        free = expr.free_symbols
+        total = sp.Integer(0)
+        for s, v in zip(self.q, self.qdot):
+            if s in free:
+                total += sp.diff(expr, s) * v
+        for column in self.y + self.lam:
+            for k, s in enumerate(column):
+                if s in free:
+                    if k == self.depth:
+                        raise ModelError("jet depth too small for this time derivative")
+                    total += sp.diff(expr, s) * column[k + 1]
+        return total
+
+    def base_derivative(self, i: int, k: int) -> sp.Expr:
+        """d^k q_i/dt^k along q̇ = ρ(q) y."""
+        return self.base_derivative_poly(i, k).as_expr()
+
+    def base_derivative_poly(self, i: int, k: int) -> "_Poly":
+        """d^k q_i/dt^k as a coefficient polynomial (the product rule on the polynomial's
+        terms: far faster than ``sympy.diff`` on the growing expanded expressions)."""
+        column = self._base_derivatives[i]
+        if not isinstance(column[0], _Poly):
+            column[0] = _Poly.of(column[0])
+        while len(column) <= k:
+            column.append(self._poly_derivative(column[-1]))
+        return column[k]
+
+    def _poly_derivative(self, p: "_Poly") -> "_Poly":
+        if not hasattr(self, "_rules"):
+            self._rules = {}
+            for s, v in zip(self.q, self.qdot):
+                self._rules[_generator(s)] = _Poly.of(v)
+            for column in self.y + self.lam:
+                for k in range(self.depth):
+                    self._rules[_generator(column[k])] = _Poly.of(column[k + 1])
+        total = _Poly({})
+        for monomial, c in p.terms.items():
+            for j, (i, e) in enumerate(monomial):
+                if i not in self._rules:
+                    self._rules[i] = _Poly.of(sp.expand(self.derivative(_GENERATORS[i])))
+                rule = self._rules[i]
+                if not rule:
+                    continue
+                rest = monomial[:j] + ((i, e - 1),) + monomial[j + 1:] if e != 1 \
+                    else monomial[:j] + monomial[j + 1:]
+                total = total + _Poly({rest: c * e}) * rule
+        return total
+
+    def _functions(self, t: sp.Symbol) -> dict:
+        mapping = {s: sp.Function(n, real=True)(t) for s, n in zip(self.q, self.base_names)}
+        named = list(zip(self.y, self.fibre_functions)) \
+            + [(c, (n, 0)) for c, n in zip(self.lam, self.multiplier_names)]
+        for column, (name, shift) in named:
+            f = sp.Function(name, real=True)(t)
+            for k, s in enumerate(column):
+                mapping[s] = f if k + shift == 0 else sp.Derivative(f, (t, k + shift))
+        return mapping
+
+    def to_functions(self, expr, t: sp.Symbol):
+        return expr.xreplace(self._functions(t))
+
+    def from_functions(self, expr, t: sp.Symbol):
+        """Inverse of :meth:`to_functions`; derivatives of base coordinates follow from
+        the anchor (q̇ = ρ(q) y)."""
+        base = {n: i for i, n in enumerate(self.base_names)}
+        other = {name: column for column, (name, shift) in zip(self.y, self.fibre_functions)
+                 if shift == 0}
+        other |= dict(zip(self.multiplier_names, self.lam))
+
+        def jet(name, k):
+            if name in base:
+                return self.base_derivative(base[name], k) if k <= self.depth + 1 else None
+            column = other.get(name)
+            return column[k] if column is not None and k <= self.depth else None
+        return _replace_functions(expr, t, jet)
+
+
+def _algebroid_operator(jets: _AlgebroidJets, lagrangian: sp.Expr, order: int) -> sp.Matrix:
+    """EL_r(L) on jets (:mod:`symvi.consistency`): d/dt P_α − ρ^i_α ∂L/∂q^i + C^γ_{αβ} y^β P_γ with
+    P = ∂L/∂y (r = 1) or ∂L/∂y − d/dt ∂L/∂ẏ (r = 2)."""
+    y0 = [column[0] for column in jets.y]
+    P = []
+    for c, column in enumerate(jets.y):
+        p = sp.diff(lagrangian, y0[c])
+        if order == 2:
+            p -= jets.derivative(sp.diff(lagrangian, column[1]))
+        P.append(sp.expand(p))
+    dLdq = [sp.diff(lagrangian, s) for s in jets.q]
+    rows = []
+    for a in range(len(y0)):
+        row = jets.derivative(P[a])
+        row -= sum((jets.anchor[i, a] * dLdq[i] for i in range(len(jets.q))), sp.S.Zero)
+        row += sum((C[a, b] * y0[b] * P[g] for g, C in enumerate(jets.structure)
+                    for b in range(len(y0)) if C[a, b] != 0), sp.S.Zero)
+        rows.append(sp.expand(row))
+    return sp.Matrix(rows)
+
+
+def euler_lagrange_algebroid(groupoid, lagrangian: sp.Expr, order: int,
+                             t: sp.Symbol = TIME, constraints: Sequence[sp.Expr] = ()) -> sp.Matrix:
+    """The Euler–Lagrange operator EL_r(L) on the algebroid of ``groupoid`` along functions of
+    ``t`` (:mod:`symvi.consistency`): EL₁ of Appendix C.2 for ``order`` 1 (the same as
+    :func:`symvi.control.euler_lagrange_operator`), the second-order operator EL₂ for
+    ``order`` 2. ``lagrangian`` (and ``constraints``) are written in the groupoid's
+    continuous symbols; with constraints Φ^A the operator acts on L + λ_A(t) Φ^A, the
+    multipliers being functions ``lambda0(t)``, ``lambda1(t)``, … of time.
+
+    Base coordinates are functions q_i(t) (never differentiated: q̇ = ρ(q) y), fibre
+    coordinates y_α(t) with their derivatives (a pair factor's y^{(k)} is q^{(k+1)}).
+    The variational derivative of the action is −EL_r (:func:`euler_lagrange`).
+    """
+    if order not in (1, 2):
+        raise ModelError(f"order must be 1 or 2, got {order!r}")
+    jets = _AlgebroidJets(groupoid, 2 * order + 1, len(constraints))
+    mapping = jets.symbol_map()
+    L = sp.sympify(lagrangian).xreplace(mapping) \
+        + sum((lam[0] * sp.sympify(c).xreplace(mapping)
+               for lam, c in zip(jets.lam, constraints)), sp.S.Zero)
+    return _algebroid_operator(jets, L, order).applyfunc(lambda e: jets.to_functions(e, t))
+
+
+def constraint_functions(model: Model, t: sp.Symbol = TIME) -> sp.Matrix:
+    """The continuous constraints Φ^A of ``model`` along functions of ``t`` (as in
+    :func:`euler_lagrange_algebroid`)."""
+    if model.lagrangian is None:
+        raise ModelError(f"model {model.name!r} has no continuous constraints")
+    jets = _AlgebroidJets(model.groupoid, 2 * model.order + 1)
+    mapping = jets.symbol_map()
+    return sp.Matrix([jets.to_functions(sp.expand(c.xreplace(mapping)), t)
+                      for c in model.constraints])
