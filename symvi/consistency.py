@@ -217,21 +217,27 @@ def expand_residual(residual: sp.Matrix, nodes: Sequence[Sequence[sp.Symbol]],
     # the three-point rule's acceleration) costs p orders of the Taylor polynomials.
     probe = _Expander(step, {s: _series_of({0: s}, _EXACT) for node in nodes for s in node})
     first = through + 1 - min([0] + [probe.valuation(e) for e in residual])
-    for degree in range(first, first + 11):
+
+    def sample(degree):
         jets = _Jets.make(names, degree)
-        atoms = {}
-        for i, node in enumerate(nodes):
-            offset = i - centre
-            for c, s in enumerate(node):
-                atoms[s] = _series_of({k: sp.Rational(offset**k, math.factorial(k))
-                                      * jets.symbols[c][k] for k in range(degree + 1)}, degree)
-        expander = _Expander(step, atoms)
-        columns = [expander.series(e, through) for e in residual]
-        if min(s.prec for s in columns) >= through:
-            break
-    else:
-        raise ModelError(f"could not reach precision h^{through} in the residual expansion")
-    return _collect(columns, jets, step, t, through)
+        atoms = {s: _series_of({k: sp.Rational((i - centre)**k, math.factorial(k))
+                                * jets.symbols[c][k] for k in range(degree + 1)}, degree)
+                 for i, node in enumerate(nodes) for c, s in enumerate(node)}
+        return jets, atoms
+    return _expand_until(residual, step, through, t, range(first, first + 11), sample)
+
+
+def _expand_until(outputs: sp.Matrix, step: sp.Symbol, through: int, t: sp.Symbol,
+                  degrees, sample, definitions=None) -> ResidualExpansion:
+    """Lengthen the Taylor polynomials (``sample(degree)`` → jets and the series of each
+    stencil symbol) until every power of h through ``through`` is exact."""
+    for degree in degrees:
+        jets, atoms = sample(degree)
+        expander = _Expander(step, atoms, definitions)
+        columns = [expander.series(e, through) for e in outputs]
+        if min(c.prec for c in columns) >= through:
+            return _collect(columns, jets, step, t, through)
+    raise ModelError(f"could not reach precision h^{through} in the residual expansion")
 
 
 def _taylor(values: Sequence, offset: sp.Rational, degree: int) -> _Series:
@@ -310,19 +316,15 @@ def expand_stencil(outputs: sp.Matrix, z: Sequence[sp.Symbol], groupoid, step: s
     probe = _Expander(step, {s: _series_of({0: s}, _EXACT) for s in z}, definitions)
     lowest = min([0] + [probe.valuation(e) for e in outputs])
     first = max(through + 1 - lowest, 1)
-    for degree in range(first, first + 8):
+
+    def sample(degree):
         jets = _AlgebroidJets(groupoid, degree + 2 * order + 1,
                               multipliers if with_multipliers else 0)
-        atoms = _stencil_atoms(jets, groupoid, z, elements=elements, centre=centre,
-                               order=order, degree=degree, windows=windows,
-                               multipliers=multipliers, with_multipliers=with_multipliers)
-        expander = _Expander(step, atoms, definitions)
-        columns = [expander.series(e, through) for e in outputs]
-        if min(s.prec for s in columns) >= through:
-            break
-    else:
-        raise ModelError(f"could not reach precision h^{through} in the residual expansion")
-    return _collect(columns, jets, step, t, through)
+        return jets, _stencil_atoms(jets, groupoid, z, elements=elements, centre=centre,
+                                    order=order, degree=degree, windows=windows,
+                                    multipliers=multipliers, with_multipliers=with_multipliers)
+    return _expand_until(outputs, step, through, t, range(first, first + 8), sample,
+                         definitions)
 
 
 def _stencil_kernel(model: Model, dm: DerivedModel):
