@@ -1,4 +1,5 @@
-"""The group-variation oracle shared by the Lie-group and action-groupoid tests (DESIGN.md §5).
+"""The group-variation oracle shared by the Lie-group and action-groupoid tests (DESIGN.md §5),
+and their NumPy Lie-algebra helper :class:`Algebra`.
 
 Along a computed path, vary node j by ε along each basis direction with the group's own
 retraction and check by five-point differences that the action sum Σ L_d is stationary,
@@ -14,6 +15,34 @@ import numpy as np
 
 U = np.finfo(float).eps
 EPS_FD = 1e-3
+
+
+class Algebra:
+    """Basis E_a of a matrix Lie algebra, with hat, coordinates and the Cayley map."""
+
+    def __init__(self, group):
+        """``group``: a :class:`symvi.MatrixLieGroup`."""
+        self.d = group.matrix_dim
+        self.E = np.array([np.array(E.tolist(), dtype=float) for E in group.basis])
+        self.n = len(self.E)
+        self.B = self.E.reshape(self.n, -1).T          # (d², n): columns vec(E_a)
+        self.I = np.eye(self.d)
+
+    def hat(self, v):
+        return np.einsum("a,aij->ij", np.asarray(v, dtype=float), self.E)
+
+    def coords(self, X):
+        v, *_ = np.linalg.lstsq(self.B, X.reshape(-1), rcond=None)
+        # the matrix must lie in the algebra (else the variation left the group)
+        assert np.abs(self.B @ v - X.reshape(-1)).max() <= 1e-12 * (1 + np.abs(X).max())
+        return v
+
+    def cay(self, X):
+        return np.linalg.solve(self.I - X / 2, self.I + X / 2)
+
+    def cay_inv(self, W):
+        # X = 2 (W − I)(W + I)⁻¹  ⇔  X (W + I) = 2 (W − I)
+        return 2 * np.linalg.solve((W + self.I).T, (W - self.I).T).T
 
 
 @dataclass(frozen=True)

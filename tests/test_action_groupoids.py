@@ -54,7 +54,7 @@ from scipy.linalg import expm, logm
 from scipy.spatial.transform import Rotation
 
 from conftest import ACTION, LIE
-from group_oracle import assert_stationary, oracle
+from group_oracle import Algebra, assert_stationary, oracle
 import symvi
 from symvi import (SO3, ActionGroupoid, Model, ModelError, PairGroupoid,
                    ProductGroupoid)
@@ -128,16 +128,13 @@ def log_near_identity(W):
     raise AssertionError("artanh series did not converge")
 
 
-class Geometry:
+class Geometry(Algebra):
     """Basis, retraction and (for action groupoids) action of a model's groupoid."""
 
     def __init__(self, groupoid):
         group = getattr(groupoid, "group", groupoid)
-        self.d, self.retraction, self.label = group.matrix_dim, group.retraction.name, group.label
-        self.E = np.array([np.array(E.tolist(), dtype=float) for E in group.basis])
-        self.n = len(self.E)
-        self.B = self.E.reshape(self.n, -1).T
-        self.I = np.eye(self.d)
+        super().__init__(group)
+        self.retraction, self.label = group.retraction.name, group.label
         self.phi = None
         if isinstance(groupoid, ActionGroupoid):
             # the model's declared action φ (part of the model, not of the engine)
@@ -146,23 +143,11 @@ class Geometry:
                               "numpy")
             self.phi = lambda q, M: np.array(phi(q, M.reshape(-1)), dtype=float)
 
-    def hat(self, v):
-        return np.einsum("a,aij->ij", np.asarray(v, dtype=float), self.E)
-
-    def coords(self, X):
-        v, *_ = np.linalg.lstsq(self.B, X.reshape(-1), rcond=None)
-        assert np.abs(self.B @ v - X.reshape(-1)).max() <= 1e-12 * (1 + np.abs(X).max())
-        return v
-
     def tau(self, X):
-        if self.retraction == "cayley":
-            return np.linalg.solve(self.I - X / 2, self.I + X / 2)
-        return expm(X)
+        return self.cay(X) if self.retraction == "cayley" else expm(X)
 
     def tau_inv(self, W):
-        if self.retraction == "cayley":
-            return 2 * np.linalg.solve((W + self.I).T, (W - self.I).T).T
-        return log_near_identity(W)
+        return self.cay_inv(W) if self.retraction == "cayley" else log_near_identity(W)
 
     def increment(self, xi, h):
         return self.tau(h * self.hat(xi))

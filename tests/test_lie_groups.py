@@ -32,6 +32,7 @@ from symvi.models import get
 from group_oracle import EPS_FD
 from group_oracle import assert_stationary
 from group_oracle import oracle as group_oracle
+from group_oracle import Algebra
 from so3 import hat
 
 U = np.finfo(float).eps
@@ -40,33 +41,6 @@ U = np.finfo(float).eps
 # ---------------------------------------------------------------------------------------
 # NumPy Lie-group helpers (independent of the generated code)
 # ---------------------------------------------------------------------------------------
-class Algebra:
-    """Basis E_a of a matrix Lie algebra, with hat, coordinates and the Cayley map."""
-
-    def __init__(self, group: MatrixLieGroup):
-        self.d = group.matrix_dim
-        self.E = np.array([np.array(E.tolist(), dtype=float) for E in group.basis])
-        self.n = len(self.E)
-        self.B = self.E.reshape(self.n, -1).T          # (d², n): columns vec(E_a)
-        self.I = np.eye(self.d)
-
-    def hat(self, v):
-        return np.einsum("a,aij->ij", np.asarray(v, dtype=float), self.E)
-
-    def coords(self, X):
-        v, *_ = np.linalg.lstsq(self.B, X.reshape(-1), rcond=None)
-        # the matrix must lie in the algebra (else the variation left the group)
-        assert np.abs(self.B @ v - X.reshape(-1)).max() <= 1e-12 * (1 + np.abs(X).max())
-        return v
-
-    def cay(self, X):
-        return np.linalg.solve(self.I - X / 2, self.I + X / 2)
-
-    def cay_inv(self, W):
-        # X = 2 (W − I)(W + I)⁻¹  ⇔  X (W + I) = 2 (W − I)
-        return 2 * np.linalg.solve((W + self.I).T, (W - self.I).T).T
-
-
 def vary_node(alg: Algebra, f, k, a, eps, h):
     """Increments after the node variation g_k → g_k cay(ε E_a): w_{k−1} → w_{k−1} cay(εE_a)
     and w_k → cay(−εE_a) w_k (only the one that exists at the ends k = 0, E)."""
