@@ -11,6 +11,8 @@ consistency expansions (:mod:`symvi.consistency`) need are polynomial ones:
 * :func:`euler_lagrange_algebroid`: the operator EL₁ of Appendix C.2 and its second-order
   version EL₂ (paper eq. ``ecuacionesvakonomoalgebroides2``, times −1), with signs and
   conventions as stated in :mod:`symvi.consistency`;
+* :func:`continuous_equations`: those equations with the constraints Φ^A = 0, in named
+  jet symbols (``Omega1_dddot``, ``lambda1_dot``), for comparison with hand-derived ones;
 * :func:`constraint_functions`, and how each groupoid's fibre is sampled along a curve
   (:func:`unsupported`, :func:`component_names`).
 
@@ -163,7 +165,8 @@ class _AlgebroidJets:
     derivatives y^{(k)} of the fibre curve (k ≤ depth) and of ``multipliers`` functions
     λ_A; the total derivative uses q̇ = ρ(q) y."""
 
-    def __init__(self, groupoid, depth: int, multipliers: int = 0):
+    def __init__(self, groupoid, depth: int, multipliers: int = 0,
+                 multiplier_names: Sequence[str] | None = None):
         algebroid = groupoid.algebroid()
         self.algebroid, self.depth = algebroid, depth
         self.layout = _layout(groupoid)
@@ -184,7 +187,8 @@ class _AlgebroidJets:
         #: y^{(k)} is q^{(k+1)}).
         self.fibre_functions = tuple((self.base_names[i], 1) if kind == "node" else (str(y), 0)
                                      for (kind, i), y in zip(self.layout, algebroid.y))
-        self.multiplier_names = tuple(f"lambda{a}" for a in range(multipliers))
+        self.multiplier_names = tuple(multiplier_names or
+                                      (f"lambda{a}" for a in range(multipliers)))
         self._base_derivatives = [[s] for s in self.q]
 
     def symbol_map(self) -> dict:
@@ -325,3 +329,62 @@ def constraint_functions(model: Model, t: sp.Symbol = TIME) -> sp.Matrix:
     mapping = jets.symbol_map()
     return sp.Matrix([jets.to_functions(sp.expand(c.xreplace(mapping)), t)
                       for c in model.constraints])
+
+
+def derivative_name(name: str, k: int) -> str:
+    """Name of the k-th time derivative of the coordinate ``name``: ``Omega1``,
+    ``Omega1_dot``, ``Omega1_ddot``, ``Omega1_dddot``, then ``Omega1_d4``, …"""
+    return name + (("", "_dot", "_ddot", "_dddot")[k] if k < 4 else f"_d{k}")
+
+
+@dataclass(frozen=True, eq=False)
+class ContinuousEquations:
+    """A model's continuous Euler–Lagrange equations in named jet symbols (§3.3.2).
+
+    ``equations`` are EL_r(L + λ_A Φ^A), one per fibre direction (paper display after
+    "These equations are given by", times −1, with ERRATA 8's correction), followed by the
+    constraints Φ^A. ``symbols`` maps every name they may use to its symbol: base points
+    (``Gamma1``; their derivatives follow from the anchor, q̇ = ρ(q)y), fibre coordinates and
+    their derivatives (``Omega1`` … ``Omega1_d4``; a pair factor's ``theta1_dot`` …
+    ``theta1_d4``) and the multipliers ``lambda1`` … with theirs. ``leading`` lists the
+    fibre coordinates' and multipliers' derivatives, highest first.
+    """
+
+    equations: tuple
+    symbols: dict
+    leading: tuple
+    jets: _AlgebroidJets
+    names: dict
+
+    def named(self, expr) -> sp.Expr:
+        """``expr`` with functions of time (``Omega1(t)``, ``Derivative(theta1(t), (t, 4))``,
+        ``lambda1(t)``, whatever the time symbol) in the named symbols."""
+        expr = sp.sympify(expr)
+        times = {f.args[0] for f in expr.atoms(AppliedUndef) if len(f.args) == 1}
+        for t in times:
+            expr = self.jets.from_functions(expr, t)
+        return expr.xreplace(self.names)
+
+
+def continuous_equations(model: Model) -> ContinuousEquations:
+    """The continuous (constrained) Euler–Lagrange equations of ``model``: EL_r(L̂) = 0 with
+    L̂ = L + λ_A Φ^A, and Φ^A = 0 (§3.3.2; :class:`ContinuousEquations`)."""
+    if model.lagrangian is None:
+        raise ModelError(f"model {model.name!r} has no continuous Lagrangian")
+    s = len(model.constraints)
+    jets = _AlgebroidJets(model.groupoid, 2 * model.order + 1, s,
+                          tuple(f"lambda{a + 1}" for a in range(s)))
+    mapping = jets.symbol_map()
+    constraints = [sp.sympify(c).xreplace(mapping) for c in model.constraints]
+    L = sp.sympify(model.lagrangian).xreplace(mapping) \
+        + sum((lam[0] * c for lam, c in zip(jets.lam, constraints)), sp.S.Zero)
+    names = {q: sp.Symbol(n) for q, n in zip(jets.q, jets.base_names)}
+    for column, (name, shift) in zip(jets.y, jets.fibre_functions):
+        names |= {s: sp.Symbol(derivative_name(name, k + shift)) for k, s in enumerate(column)}
+    for column, name in zip(jets.lam, jets.multiplier_names):
+        names |= {s: sp.Symbol(derivative_name(name, k)) for k, s in enumerate(column)}
+    rows = list(_algebroid_operator(jets, L, model.order)) + [sp.expand(c) for c in constraints]
+    leading = tuple(names[column[k]] for k in reversed(range(jets.depth))
+                    for column in jets.y + jets.lam)
+    return ContinuousEquations(tuple(r.xreplace(names) for r in rows),
+                               {v.name: v for v in names.values()}, leading, jets, names)

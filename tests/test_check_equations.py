@@ -2,7 +2,7 @@
 
 Positive: correct hand equations pass, also rescaled, permuted and recombined. Negative:
 a broken equation fails with the offending term named. The paper's fixtures reproduce
-ERRATA.md items 1–7, each located by its display and its terms; ``symvi check`` reports
+ERRATA.md items 1–7, each located (8 and 9 in test_check_euler_lagrange) by its display and its terms; ``symvi check`` reports
 them (exit 1), skips models without hand equations (exit 0) and prints parseable JSON.
 """
 from __future__ import annotations
@@ -171,7 +171,9 @@ def test_errata_1_to_3_and_7_rigid_body(rigid_report):
     assert "mis-scaled by h" in text
     assert "coste2 (§3.3.4), one term of the sum, summand: equal up to the factor 1/h" in text
     assert verdicts(rigid_report)[("paper eq. sdfinal (§3.3.4)", "L_d")]
-    assert rigid_report["equations"].details[-1] == "agree: paper eq. sdfinal (§3.3.4)"
+    assert rigid_report["equations"].details[-1] == (
+        "agree: paper eq. sdfinal (§3.3.4); ERRATA 9: eq. coste (§3.3.4) summed over "
+        "k = 0 … N−2, N = 4")
     # 7: the ± signs of the discrete Euler–Poincaré equations
     for label, term in (("e₁", "(I2 - I3)"), ("e₂", "(I1 - I3)"), ("e₃", "(I1 - I2)")):
         line = next(l for l in rigid_report["equations"].details if f"{label} component" in l)
@@ -195,7 +197,8 @@ def test_errata_4_to_6_heavy_top(heavy_report):
         "d/dt(∂l/∂θ̇_i) = u_i (§3.3.5); " + that_is + " (eq. 3); " + that_is + "; paper's "
         "constraints Φ¹, Φ², Φ³ (§3.3.5) (Φ³); paper's L̃ (§3.3.5); paper's cost C = ½(u₁² + "
         "u₂²) (§3.3.5); paper's printed Φ_d (§3.3.5) (Φ_d³); Appendix D's cay in "
-        "Γ_{k+1} = cay(hξ_k)ᵀΓ_k (ERRATA 6)")
+        "Γ_{k+1} = cay(hξ_k)ᵀΓ_k (ERRATA 6); paper's optimality conditions (§3.3.2) for "
+        "this L̃, Φ (Φ¹, Φ², Φ³); ERRATA 8's optimality conditions (§3.3.2) for this L̃, Φ")
     # 4: spurious dot, missing −J₂θ̇₂Ω₃; sign of J₁θ̇₁Ω₃, missing −Ī₃Ω₁Ω₃ — also in Φ¹, Φ²
     for where in (f"{that_is}, eq. 1", "paper's constraints Φ¹, Φ², Φ³ (§3.3.5), Φ¹"):
         assert (f"{where}: vs derived eq. 1: I3bar*Omega2*Omega3_dot where "

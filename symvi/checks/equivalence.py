@@ -1,9 +1,7 @@
 """The symbolic machinery of the check ``equations`` (:mod:`symvi.checks.equations`).
 
-A :class:`Space` holds the derived expressions of one target and the symbols hand
-expressions may use (the continuous symbols of §3.3, or one window's discrete symbols,
-DESIGN.md §3); a :class:`Hand` is a hand-derived display resolved against it, in the
-model's symbols and in the user's own. On these: the unknowns in which a derived system is
+A :class:`Hand` is a hand-derived display resolved against the :class:`Space` of its
+target (:mod:`symvi.checks.spaces`), in the model's symbols and in the user's own. On these: the unknowns in which a derived system is
 linear and its solution (:func:`linear_unknowns`, :func:`solve_linear`), the terms in
 which a hand expression differs from a derived one, grouped by the parameters they carry
 (:meth:`Hand.locate`), and notes naming a recognisable mistake — increments ξ = τ⁻¹(w)/h
@@ -14,20 +12,17 @@ mis-scaled (:func:`scaled_increments`), named constants with the wrong value
 from __future__ import annotations
 
 from collections import Counter
-from dataclasses import dataclass, field
 from typing import TYPE_CHECKING, Any, Mapping
 
 import sympy as sp
 
-from ..discretise import DiscreteModel, discretise, h as STEP
-from ..errors import ModelError
+from ..discretise import h as STEP
 from ..rank import generic_rank
+from .spaces import Space
 
 if TYPE_CHECKING:
     from .equations import HandDerived
 
-#: Targets compared in the continuous symbols (the others on one window).
-CONTINUOUS = ("controls", "constraints", "lagrangian")
 _MAX_GROUPS = 8
 
 
@@ -61,129 +56,6 @@ def is_zero(expr: sp.Expr) -> bool:
 def show(expr: sp.Expr) -> str:
     """``expr`` as written in messages."""
     return sp.sstr(expr)
-
-
-@dataclass
-class Space:
-    """The derived expressions of one target and the symbols hand expressions may use."""
-
-    derived: list
-    names: dict            # name → model symbol (for binding)
-    variables: list        # model symbols that are unknown quantities (not parameters, h)
-    display: dict          # model symbol → plain Symbol of its public name
-    candidates: list       # preferred unknowns of the equations mode, in order
-    scaled: list = field(default_factory=list)   # increments ξ = τ⁻¹(w)/h, per slot
-    controls: tuple = ()   # (control symbol, EL(L)_a) for continuous targets
-    leading: list = field(default_factory=list)
-    fixed: dict = field(default_factory=dict)    # parameter defaults and h for sampling
-
-
-def _window_names(groupoid, order, xs, fs) -> dict[str, sp.Symbol]:
-    """Public name → slot symbol: the groupoid's discrete symbols, plus ``<base>_<j>`` for
-    the base point of node j where the groupoid has no name for it (action groupoids)."""
-    names = {}
-    for public, value in groupoid.discrete_mapping(order, xs, fs).items():
-        if isinstance(value, sp.Symbol):
-            names.setdefault(public.name, value)
-    for i, x0 in enumerate(xs[0]):
-        base = next((n for n, v in names.items() if v == x0), None)
-        if base is None:
-            continue
-        stem = base[:-2] if base.endswith("_0") else base
-        names.setdefault(f"{stem}_0", x0)
-        for j in range(1, len(xs)):
-            if xs[j]:
-                names.setdefault(f"{stem}_{j}", xs[j][i])
-    return names
-
-
-def symbol_space(hand: HandDerived, model, discrete: DiscreteModel | None, derived) -> Space:
-    """The space of ``hand.target`` on ``model``: continuous symbols (§3.3) or one window's
-    discrete symbols (DESIGN.md §3). ``discrete`` and ``derived`` are reused when passed."""
-    params = {s.name: s for s in model.parameter_symbols}
-    fixed = dict(model.parameters) | {STEP: 0.1}
-    if hand.target in CONTINUOUS:
-        return _continuous_space(hand, model, params, fixed)
-    if hand.target == "residual":
-        exprs, names, slots, fs = _residual_window(model, discrete, derived)
-    else:
-        exprs, names, slots, fs = _window(hand.target, model, discrete)
-    public = {v: sp.Symbol(k) for k, v in reversed(list(names.items()))}
-    display = {s: public.get(s, sp.Symbol(s.name)) for s in slots}
-    scaled = [[v for v, s in zip(f, model.groupoid.step_scaled()) if s] for f in fs]
-    return Space(exprs, names | params | {"h": STEP}, slots, display, slots,
-                 scaled=scaled, fixed=fixed)
-
-
-def _continuous_space(hand: HandDerived, model, params: dict, fixed: dict) -> Space:
-    """Controls, constraints or L̃ in the continuous symbols and the control symbols."""
-    g, target = model.groupoid, hand.target
-    if model.lagrangian is None:
-        raise ModelError(f"model {model.name!r} has no continuous Lagrangian to compare "
-                         f"with")
-    count = len(model.controls)
-    names = hand.controls or tuple(f"u{a + 1}" for a in range(count))
-    if len(names) != count:
-        raise ModelError(f"{len(names)} control names for the {count} controls of "
-                         f"{model.name!r}")
-    c = tuple(sp.Symbol(n, real=True) for n in names)
-    cont = list(g.continuous_symbols(model.order))
-    leading = [s for s in g.leading_symbols(model.order) if s in cont]
-    exprs = {"controls": ([u - ci for ci, u in zip(c, model.controls)]
-                          if hand.mode == "equations" else list(model.controls)),
-             "constraints": list(model.constraints),
-             "lagrangian": [model.lagrangian]}[target]
-    if not exprs:
-        raise ModelError(f"model {model.name!r} has no {target}")
-    symbols = cont + list(c)
-    return Space(exprs, {s.name: s for s in symbols} | params, symbols,
-                 {s: sp.Symbol(s.name) for s in symbols},
-                 list(c) if target == "controls" else leading,
-                 controls=tuple(zip(c, model.controls)), leading=leading, fixed=fixed)
-
-
-def _residual_window(model, discrete, derived) -> tuple[list, dict, list, list]:
-    """(residual, names, slots, fibres) of the ``step`` kernel's stencil (§2.2)."""
-    g = model.groupoid
-    dk = derived if derived is not None else _derive(model, discrete)
-    try:
-        kernel = dk.kernel("step")
-    except StopIteration:
-        raise ModelError(f"model {model.name!r} has no step residual (constrained models "
-                         f"are solved as whole trajectories)") from None
-    residual = dict(kernel.outputs)["residual"]
-    for symbol, expr in reversed(kernel.definitions):
-        residual = residual.xreplace({symbol: expr})
-    m, n, K = g.source_dim, g.fibre_dim, 2 * dk.order
-    x0 = tuple(kernel.z[:m])
-    fs = [tuple(kernel.z[m + k * n:m + (k + 1) * n]) for k in range(K)]
-    names = _window_names(g, K, [x0] + [()] * (K - 1), fs)
-    slots = [v for f in reversed(fs) for v in f] + list(x0)
-    return list(residual), names, slots, fs
-
-
-def _window(target: str, model, discrete) -> tuple[list, dict, list, list]:
-    """(expressions, names, slots, fibres) of L_d, Φ_d or β on one window."""
-    g = model.groupoid
-    dm = discrete if discrete is not None else discretise(model)
-    xs, fs = [s[0] for s in dm.slots], [s[1] for s in dm.slots]
-    names = _window_names(g, dm.order, xs, fs)
-    slots = [v for j in reversed(range(dm.order)) for v in fs[j] + xs[j]]
-    if target == "target_map":
-        exprs = list(g.target(xs[0], fs[0], STEP))
-        if not exprs:
-            raise ModelError(f"the groupoid of {model.name!r} has no base: its target "
-                             f"map is empty")
-    else:
-        exprs = [dm.lagrangian] if target == "discrete_lagrangian" else list(dm.constraints)
-        if not exprs:
-            raise ModelError(f"model {model.name!r} has no discrete constraints")
-    return exprs, names, slots, fs
-
-
-def _derive(model, discrete):
-    from ..derive import derive
-    return derive(discrete if discrete is not None else discretise(model))
 
 
 # -- linear algebra on the derived system -------------------------------------------------
@@ -321,7 +193,8 @@ class Hand:
     and in the user's own symbols (``own``), and how to show derived ones in the latter."""
 
     def __init__(self, hand: HandDerived, space: Space):
-        keys = hand.symbols
+        convert = space.convert or (lambda e: e)
+        keys = {k: convert(v) for k, v in hand.symbols.items()}
         model_names = set(space.names)
         variables = set(space.variables)
         variable_names = {n for n, s in space.names.items() if s in variables}
@@ -346,7 +219,7 @@ class Hand:
         self.reverse = reverse
         self.parameters = {n for n, s in space.names.items() if s not in space.variables}
         self.own, self.math, undefined = [], [], set()
-        for e in hand.expressions:
+        for e in map(convert, hand.expressions):
             own = _plain(_substitute(e, opaque)).xreplace(self.canon).xreplace(reverse)
             self.own.append(own)
             full = _plain(_substitute(e, keys))
