@@ -27,10 +27,11 @@ class _Problem:
 
     def __init__(self, model, p, h):
         self.model, self.p, self.h = model, p, h
-        #: An unconstrained optimal-control problem minimises its cost: Newton steps are
-        #: then globalised on the cost itself (see :func:`_minimising_step`).
-        self.minimise = bool(model.info.get("controls")) and not model.constraints
-        self.shift = 0.0
+        #: An optimal-control problem minimises its cost: Newton steps are then globalised
+        #: on the cost itself, or with constraints on its ℓ1 exact penalty (see
+        #: :func:`_descent_step`).
+        self.minimise = bool(model.info.get("controls"))
+        self.shift, self.penalty = 0.0, 0.0
         self._band = self._work = None   # reused: fresh pages are slow to touch at large N
 
     def merit(self, path: Path) -> tuple[float, float]:
@@ -53,15 +54,17 @@ class _Problem:
                                         m.ptr(ab.T) if with_jacobian else m.ffi.NULL)
         return res, ab, bw, code == 0
 
-    def solve(self, ab, bw: int, rhs: np.ndarray, shift: float = 0.0) -> np.ndarray:
-        """Solve (J + shift·I) x = rhs with LAPACK's banded LU (dgbsv), J in the band
-        storage of :meth:`assemble` (left intact: the work copy is factorised)."""
+    def solve(self, ab, bw: int, rhs: np.ndarray, shift: float = 0.0,
+              shifted: np.ndarray | None = None) -> np.ndarray:
+        """Solve (J + shift·D) x = rhs with LAPACK's banded LU (dgbsv), J in the band
+        storage of :meth:`assemble` (left intact: the work copy is factorised), D the
+        identity on the unknowns ``shifted`` (a mask; default all)."""
         from scipy.linalg import LinAlgError
         from scipy.linalg.lapack import dgbsv
 
         np.copyto(self._work, ab)
         if shift:
-            self._work[2 * bw] += shift
+            self._work[2 * bw] += shift if shifted is None else shift * shifted
         _, _, x, info = dgbsv(bw, bw, self._work, rhs, overwrite_ab=True)
         if info != 0:
             raise LinAlgError(f"dgbsv: singular at column {info}" if info > 0 else "dgbsv")
@@ -81,13 +84,31 @@ class _Problem:
         return max(floor, float(np.abs(path.x).max(initial=0.0)),
                    float(np.abs(path.lam).max(initial=0.0)))
 
+    def _blocks(self, path: Path) -> np.ndarray:
+        """The nodes of the C assembler's blocks: each holds a node correction η_t (n
+        unknowns, its residual rows) and, with constraints, the multipliers of window
+        t − 1 (s unknowns, the rows of its constraints Φ_d)."""
+        r, s = self.model.order, self.model.constraints
+        t0 = r - 1 if s else r
+        return np.arange(t0, path.x.shape[0] - t0)
+
+    def constraint_rows(self, path: Path) -> np.ndarray:
+        """Mask of the multiplier unknowns (= constraint rows) in the block layout."""
+        n, s = self.model.n, self.model.constraints
+        return np.tile(np.r_[np.zeros(n, bool), np.ones(s, bool)], len(self._blocks(path)))
+
+    def multipliers(self, path: Path) -> np.ndarray:
+        """The multipliers λ in the block layout (their rows of :meth:`constraint_rows`)."""
+        if not self.model.constraints:
+            return np.zeros(0)
+        return path.lam[self._blocks(path) - 1].reshape(-1)
+
     def magnitudes(self, path: Path) -> np.ndarray:
         """Magnitude of every unknown, in the block layout of the C assembler: a node
         correction is as precise as the fibres meeting there (a group fibre is held as
         its increment hξ, a pair fibre is the node itself), a multiplier as itself."""
-        m, r, s = self.model, self.model.order, self.model.constraints
-        t0 = r - 1 if s else r
-        blocks = np.arange(t0, path.x.shape[0] - t0)
+        m, s = self.model, self.model.constraints
+        blocks = self._blocks(path)
         scaled = np.array(m.info.get("step_scaled") or [False] * m.n, dtype=bool)
         before = np.abs(path.f[np.maximum(blocks - 1, 0)])
         after = np.abs(path.f[np.minimum(blocks, path.f.shape[0] - 1)])
@@ -113,7 +134,9 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
         fixed ends (linear, resp. g_{r−1} τ(s·τ⁻¹(g_{r−1}⁻¹ g_{N−r+1})), base points
         moved along). Multipliers start at zero.
     maxiter, xtol, ftol : Newton stops when the update ‖Δ‖∞ ≤ xtol·(1 + size) or the
-        residual ‖R‖∞ ≤ ftol. A backtracking line search on ‖R‖₂ globalises it.
+        residual ‖R‖∞ ≤ ftol. Optimal-control problems are globalised on their cost
+        (with constraints: its ℓ1 exact penalty S + ν‖Φ_d‖₁) with a shifted Hessian and
+        Armijo backtracking, other problems and the last steps by backtracking on ‖R‖₂.
     raise_on_failure : raise :class:`NewtonError` (carrying the failed result and its
         iteration history) instead of returning a failed result.
     """
@@ -187,7 +210,7 @@ def _newton(problem, state, maxiter: int, xtol: float, ftol: float):
         else:
             taken = None
             if problem.minimise:
-                state, taken = _minimising_step(problem, state, res, ab, bw, delta)
+                state, taken = _descent_step(problem, state, res, ab, bw, delta)
             if taken is None:
                 state, taken = _line_search(problem, state, delta, res)
         if taken is None:
@@ -227,32 +250,57 @@ def _rounding_level(ab: np.ndarray, bw: int, u: np.ndarray) -> float:
     return 16 * np.finfo(float).eps * float(scale.max(initial=0.0))
 
 
-def _minimising_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0**-12):
-    """A descent step on the cost S: Newton on its gradient R with the Hessian shifted by
-    μ·max|diag| until the step goes downhill and passes Armijo on S (Nocedal & Wright
-    §3.4); μ shrinks again after full steps. Far from a minimum this keeps Newton away
-    from saddles and maxima of S, where the residual-norm merit is content to go.
-    Returns (state, None) when S cannot resolve the step (near convergence, the predicted
-    decrease is below its rounding level) or no shift helps.
+def _descent_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0**-12):
+    """A descent step on the cost S = Σ L_d, or with constraints Φ_d on its ℓ1 exact
+    penalty φ = S + ν‖Φ_d‖₁ (Nocedal & Wright §18.3, ν above the largest new multiplier).
+
+    The Newton (SQP) step keeps J_Φ d = −Φ_d, so φ's slope along it is
+    R_η·d + λ·Φ_d − ν‖Φ_d‖₁ with R_η the node rows of the residual. When that is not
+    negative, the node block of the Jacobian is shifted by μ·max|diag| (Nocedal & Wright
+    §3.4) until it is; then Armijo backtracking on φ. μ shrinks again after full steps.
+    Far from a minimum this keeps Newton away from saddles and maxima of S, where the
+    residual-norm merit is content to go. Returns (state, None) when φ cannot resolve
+    the step (near convergence, the predicted decrease is below its rounding level) or no
+    shift helps.
     """
+    rows = problem.constraint_rows(state)
+    nodes, lam, phi_d = ~rows, problem.multipliers(state), res[rows]
+    infeasibility = float(np.abs(phi_d).sum())
+
+    def slope(delta):
+        """φ's slope along ``delta``, after raising ν above its new multipliers."""
+        if rows.any():
+            problem.penalty = max(problem.penalty,
+                                  1.5 * float(np.abs(lam + delta[rows]).max(initial=0.0)))
+        return float(res[nodes] @ delta[nodes] + lam @ phi_d) - problem.penalty * infeasibility
+
     cost, noise = problem.merit(state)
-    if -float(res @ delta) <= noise:
+    if -slope(delta) <= noise * (1 + problem.penalty):
         return state, None
-    scale, shift = float(np.abs(ab[2 * bw]).max(initial=0.0)), problem.shift
+    scale, shift = float(np.abs(ab[2 * bw][nodes]).max(initial=0.0)), problem.shift
     while shift <= 1e3:
         if shift > 0.0:
-            delta = problem.solve(ab, bw, -res, shift * scale)
-        slope = float(res @ delta)
-        alpha = 1.0
-        while slope < 0.0 and alpha >= min_alpha:
+            delta = problem.solve(ab, bw, -res, shift * scale, nodes)
+        descent, nu, alpha = slope(delta), problem.penalty, 1.0
+        while descent < 0.0 and alpha >= min_alpha:
             trial = problem.moved(state, delta, alpha)
-            if trial is not None and problem.merit(trial)[0] <= cost + 1e-4 * alpha * slope:
+            if trial is not None and _penalty(problem, trial, rows, nu) \
+                    <= cost + nu * infeasibility + 1e-4 * alpha * descent:
                 problem.shift = shift / 10 if alpha == 1.0 and shift > 1e-10 else \
                     (0.0 if alpha == 1.0 else shift)
                 return trial, alpha * float(np.abs(delta).max(initial=0.0))
             alpha /= 2
         shift = max(10 * shift, 1e-8)
     return state, None
+
+
+def _penalty(problem, path: Path, rows: np.ndarray, nu: float) -> float:
+    """φ = S + ν‖Φ_d‖₁ at ``path`` (S alone without constraints)."""
+    cost = problem.merit(path)[0]
+    if not rows.any():
+        return cost
+    res, _, _, finite = problem.assemble(path, False)
+    return cost + nu * float(np.abs(res[rows]).sum()) if finite else np.inf
 
 
 def _line_search(problem, state, delta, res, min_alpha: float = 2.0**-12):
