@@ -121,6 +121,16 @@ def test_discrete_action_factor_is_named():
         "equal up to the factor 2")
 
 
+def test_discrete_action_with_one_window_too_few():
+    """Two elements of a second-order model: one window; a hand sum with none is not
+    recounted below the model's order."""
+    hand = HandDerived("spline", "discrete_action", [spline_action(1)], elements=2)
+    assert compare(hand, get("cubic_spline")).ok
+    wrong = HandDerived("spline", "discrete_action", [sp.Integer(0)], elements=2)
+    result = compare(wrong, get("cubic_spline"))
+    assert not result.ok and result.equations[0].message.startswith("differs")
+
+
 def test_discrete_action_errors():
     with pytest.raises(ValueError, match="unknown target"):
         HandDerived("x", "discrete_actions", [0])

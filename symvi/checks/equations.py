@@ -25,7 +25,7 @@ fixtures (:mod:`symvi.fixtures`), where this check reproduces ``ERRATA.md``.
 from __future__ import annotations
 
 import random
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Sequence
 
 import sympy as sp
@@ -248,16 +248,15 @@ def compare(hand: HandDerived, model=None, discrete: DiscreteModel | None = None
 def _miscounted_terms(hand: HandDerived, model, discrete) -> list | None:
     """A discrete action that is the sum over one element more or fewer: its terms are
     miscounted (ERRATA 9: a sum to k = N−1 needs a ξ_N)."""
-    from dataclasses import replace
+    r = (discrete or discretise(model)).order
     for elements in (hand.elements + 1, hand.elements - 1):
-        if elements < 1:
+        if elements < r:
             continue
         recounted = replace(hand, elements=elements)
         space = symbol_space(recounted, model, discrete, None)
         other = Hand(recounted, space)
         if not other.undefined and all(is_zero(H - D) for H, D in zip(other.math,
                                                                         space.derived)):
-            r = (discrete or discretise(model)).order
             have, claimed = hand.elements - r + 1, elements - r + 1
             return [EquationResult(hand.labels[0], False,
                                    f"sums {claimed} windows (k = 0 … {claimed - 1}) where a "
@@ -276,7 +275,10 @@ def _proportional_at_samples(H: sp.Expr, D: sp.Expr, variables: set) -> bool:
     ratios = []
     for _ in range(3):
         point = others | {s: sp.Float(rng.uniform(-1, 1)) for s in variables}
-        h_value, d_value = complex(H.evalf(subs=point)), complex(D.evalf(subs=point))
+        try:
+            h_value, d_value = complex(H.evalf(subs=point)), complex(D.evalf(subs=point))
+        except (TypeError, ValueError):     # not a number there: decide symbolically
+            return True
         if d_value == 0:
             return True
         ratios.append(h_value / d_value)
