@@ -24,7 +24,6 @@ fixtures (:mod:`symvi.fixtures`), where this check reproduces ``ERRATA.md``.
 """
 from __future__ import annotations
 
-import random
 from dataclasses import dataclass, field, replace
 from typing import Any, Mapping, Sequence
 
@@ -248,7 +247,8 @@ def compare(hand: HandDerived, model=None, discrete: DiscreteModel | None = None
 def _miscounted_terms(hand: HandDerived, model, discrete) -> list | None:
     """A discrete action that is the sum over one element more or fewer: its terms are
     miscounted (ERRATA 9: a sum to k = N−1 needs a ξ_N)."""
-    r = (discrete or discretise(model)).order
+    discrete = discrete or discretise(model)
+    r = discrete.order
     for elements in (hand.elements + 1, hand.elements - 1):
         if elements < r:
             continue
@@ -266,23 +266,14 @@ def _miscounted_terms(hand: HandDerived, model, discrete) -> list | None:
     return None
 
 
-def _proportional_at_samples(H: sp.Expr, D: sp.Expr, variables: set) -> bool:
-    """Whether H/D takes one value at three random points of ``variables`` (the other
-    symbols held at one random point): a cheap test before cancelling H/D symbolically."""
-    rng = random.Random(5)
-    others = {s: sp.Float(rng.uniform(0.5, 1.5)) for s in (H.free_symbols | D.free_symbols)
-              - variables}
-    ratios = []
-    for _ in range(3):
-        point = others | {s: sp.Float(rng.uniform(-1, 1)) for s in variables}
-        try:
-            h_value, d_value = complex(H.evalf(subs=point)), complex(D.evalf(subs=point))
-        except (TypeError, ValueError):     # not a number there: decide symbolically
-            return True
-        if d_value == 0:
-            return True
-        ratios.append(h_value / d_value)
-    return all(abs(r - ratios[0]) <= 1e-9 * (1 + abs(ratios[0])) for r in ratios)
+def _proportional_at_samples(H: sp.Expr, D: sp.Expr, variables: set, fixed: dict) -> bool:
+    """Whether H/D is free of ``variables`` at random points (the other symbols at their
+    ``fixed`` values): [[H, D], [H', D']], primes at a second point, has rank < 2. A cheap
+    test before cancelling H/D symbolically."""
+    copies = {s: sp.Dummy(s.name) for s in variables}
+    pair = sp.Matrix([[H, D], [H.xreplace(copies), D.xreplace(copies)]])
+    others = pair.free_symbols - set(variables) - set(copies.values())
+    return matrix_rank(pair, {s: fixed.get(s, 1.0) for s in others}) < 2
 
 
 def _compare_values(hand: Hand, derived: list, spec: HandDerived):
@@ -299,8 +290,9 @@ def _compare_values(hand: Hand, derived: list, spec: HandDerived):
             continue
         variables = set(hand.space.variables) | {s for s in H.free_symbols
                                                   if s.name in hand.undefined}
-        ratio = sp.cancel(H / D) if D != 0 and _proportional_at_samples(H, D, variables) \
-            else sp.zoo
+        proportional = D != 0 and _proportional_at_samples(H, D, variables,
+                                                             hand.space.fixed)
+        ratio = sp.cancel(H / D) if proportional else sp.zoo
         if ratio.is_finite is not False and ratio != 0 and not ratio.free_symbols & variables:
             results.append(EquationResult(label, False, f"equal up to the factor "
                                                         f"{show(ratio)}: hand = "
