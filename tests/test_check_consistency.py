@@ -27,6 +27,7 @@ import pytest
 import sympy as sp
 from sympy.core.function import AppliedUndef
 
+from curves import curve as _f, derivative as _d, parameters as _params
 from conftest import BUNDLED
 from symvi import SO3, ActionGroupoid, MatrixLieGroup, Model, PairGroupoid, ProductGroupoid, h
 from symvi.checks import Context, check, run_check
@@ -39,18 +40,6 @@ from symvi.discretise import discretise
 from symvi.models import get
 
 t = TIME
-
-
-def _f(name):
-    return sp.Function(name, real=True)(t)
-
-
-def _d(f, k=1):
-    return sp.Derivative(f, (t, k))
-
-
-def _params(model):
-    return {str(s): s for s, _ in model.parameters}
 
 
 def _zero(expr):

@@ -164,12 +164,16 @@ class WrongActionSign(ActionGroupoid):
         return M
 
 
-def test_wrong_infinitesimal_action_is_caught():
+def _broken_planar_top(groupoid_class, name: str):
+    """Check ``routes`` on a planar top, SO(2) acting on (u, v), with a broken groupoid."""
     SO2 = MatrixLieGroup([[[0, -1], [1, 0]]], "omega", "SO2")
-    G = WrongActionSign(SO2, "u v", lambda q, W: W.T * q)
+    G = groupoid_class(SO2, "u v", lambda q, W: W.T * q)
     (omega,), (u, v) = G.xi, G.q
-    model = Model(name="broken_planar_top", groupoid=G, lagrangian=omega**2 / 2 - u - v**2)
-    result = _routes(model)
+    return _routes(Model(name=name, groupoid=G, lagrangian=omega**2 / 2 - u - v**2))
+
+
+def test_wrong_infinitesimal_action_is_caught():
+    result = _broken_planar_top(WrongActionSign, "broken_planar_top")
     assert result.status == "fail"
     text = "\n".join(result.details)
     assert "the groupoid's left()[:, 0]" in text and "direction e_1 (omega)" in text
@@ -184,11 +188,7 @@ class WrongTarget(ActionGroupoid):
 
 
 def test_target_inconsistent_with_inverse_is_caught():
-    SO2 = MatrixLieGroup([[[0, -1], [1, 0]]], "omega", "SO2")
-    G = WrongTarget(SO2, "u v", lambda q, W: W.T * q)
-    (omega,), (u, v) = G.xi, G.q
-    model = Model(name="broken_target", groupoid=G, lagrangian=omega**2 / 2 - u - v**2)
-    result = _routes(model)
+    result = _broken_planar_top(WrongTarget, "broken_target")
     assert result.status == "fail"
     assert any(d.startswith("target(): β(g_0)") for d in result.details), result.details
 

@@ -18,28 +18,15 @@ from __future__ import annotations
 import pytest
 import sympy as sp
 
+from curves import curve as _q, derivative as _d, parameters as _params
 from conftest import PAIR
 from symvi import Model, PairGroupoid, h
-from symvi.consistency import (TIME, check_consistency, euler_lagrange, expand_residual,
+from symvi.consistency import (check_consistency, euler_lagrange, expand_residual,
                                residual_expansion)
 from symvi.derive import derive
 from symvi.discretise import discretise
 from symvi.errors import ModelError
 from symvi.models import get
-
-t = TIME
-
-
-def _q(name):
-    return sp.Function(name, real=True)(t)
-
-
-def _d(f, k=1):
-    return sp.Derivative(f, (t, k))
-
-
-def _params(model):
-    return {str(s): s for s, _ in model.parameters}
 
 
 def _hand_written(name):
