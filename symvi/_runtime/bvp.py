@@ -260,8 +260,9 @@ def _descent_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0**-1
     §3.4) until it is; then Armijo backtracking on φ. μ shrinks again after full steps.
     Far from a minimum this keeps Newton away from saddles and maxima of S, where the
     residual-norm merit is content to go. Returns (state, None) when φ cannot resolve
-    the step (near convergence, the predicted decrease is below its rounding level) or no
-    shift helps.
+    the step (near convergence, the predicted change is below its rounding level) or no
+    shift helps; a step that climbs φ is shifted, never handed back, since the
+    residual-norm line search would then climb S.
     """
     rows = problem.constraint_rows(state)
     nodes, lam, phi_d = ~rows, problem.multipliers(state), res[rows]
@@ -275,7 +276,7 @@ def _descent_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0**-1
         return float(res[nodes] @ delta[nodes] + lam @ phi_d) - problem.penalty * infeasibility
 
     cost, noise = problem.merit(state)
-    if -slope(delta) <= noise * (1 + problem.penalty):
+    if abs(slope(delta)) <= noise * (1 + problem.penalty):
         return state, None
     scale, shift = float(np.abs(ab[2 * bw][nodes]).max(initial=0.0)), problem.shift
     while shift <= 1e3:
