@@ -25,6 +25,15 @@ def runtime_of(mod, stage: str):
     return sys.modules[f"{mod.__name__}._runtime.{stage}"]
 
 
+def dense_jacobian(ab: np.ndarray, bw: int) -> np.ndarray:
+    """The Jacobian from the assembler's band storage, ab[2 bw + row − col, col]."""
+    n = ab.shape[1]
+    dense = np.zeros((n, n))
+    for k in range(-bw, bw + 1):      # J[row, row + k] = ab[2 bw − k, row + k]
+        dense += np.diag(ab[2 * bw - k, k:] if k >= 0 else ab[2 * bw - k, :n + k], k)
+    return dense
+
+
 def chord_problem(mod, n_steps: int, horizon: float):
     """(problem, path at the chord guess, res, ab, bw) for the bundled example's boundary
     data over ``horizon`` in ``n_steps`` steps."""
@@ -117,11 +126,7 @@ def test_double_pendulum_over_a_longer_horizon_converges_to_a_minimum(compiled):
     problem = runtime_of(mod, "bvp")._Problem(mod.model, mod.model.params(None), 0.01)
     path = runtime_of(mod, "paths").initial_path(mod.model, ex.start, ex.end, 300,
                                                  result.x[2:-2], problem.p, 0.01)
-    _, ab, bw, _ = problem.assemble(path, True)
-    n = ab.shape[1]
-    dense = np.zeros((n, n))
-    for k in range(-bw, bw + 1):      # J[row, row + k] = ab[2 bw − k, row + k]
-        dense += np.diag(ab[2 * bw - k, k:] if k >= 0 else ab[2 * bw - k, :n + k], k)
+    dense = dense_jacobian(*problem.assemble(path, True)[1:3])
     hessian = (dense + dense.T) / 2
     assert np.abs(dense - dense.T).max() < 1e-8 * np.abs(dense).max()
     assert np.linalg.eigvalsh(hessian)[0] > 0.0

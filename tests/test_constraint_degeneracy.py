@@ -12,12 +12,11 @@ path of ``test_optimal_control.top_path``.
 """
 from __future__ import annotations
 
-import sys
-
 import numpy as np
 import pytest
 
 from symvi.models import get
+from test_bvp_merit import dense_jacobian, runtime_of
 from test_optimal_control import top_path
 
 NAME = "heavy_top_rotors_oc"
@@ -27,24 +26,18 @@ def constraint_jacobian(mod, n_steps: int):
     """(J_Φ dense, v): the constraint rows of the assembled Jacobian over the node
     unknowns at the feasible path of ``n_steps`` steps, and v = Γ at the middle node of
     every window, in the same row layout."""
-    runtime = sys.modules[f"{mod.__name__}._runtime.bvp"]
-    paths = sys.modules[f"{mod.__name__}._runtime.paths"]
     ex, p = get(NAME).example, mod.model.params(None)
     h = ex.n_steps * ex.h / n_steps
     x, g = top_path(NAME, dict(zip(mod.model.parameter_names, p)), n_steps, h)
-    path = paths.initial_path(mod.model, (x[:2], g[:2]), (x[-2:], g[-2:]), n_steps,
-                              (x[2:-2], g[2:-2]), p, h)
-    problem = runtime._Problem(mod.model, p, h)
+    path = runtime_of(mod, "paths").initial_path(
+        mod.model, (x[:2], g[:2]), (x[-2:], g[-2:]), n_steps, (x[2:-2], g[2:-2]), p, h)
+    problem = runtime_of(mod, "bvp")._Problem(mod.model, p, h)
     res, ab, bw, finite = problem.assemble(path, True)
     rows = problem.constraint_rows(path)
     assert finite and np.abs(res[rows]).max() < 1e-10     # the path is feasible
-    n = ab.shape[1]
-    dense = np.zeros((n, n))
-    for k in range(-bw, bw + 1):      # J[row, row + k] = ab[2 bw − k, row + k]
-        dense += np.diag(ab[2 * bw - k, k:] if k >= 0 else ab[2 * bw - k, :n + k], k)
     # constraint block t holds window t − 1, whose middle node is t
     gamma = path.x[problem._blocks(path), :3].reshape(-1)
-    return dense[rows][:, ~rows], gamma
+    return dense_jacobian(ab, bw)[rows][:, ~rows], gamma
 
 
 @pytest.fixture(scope="module")
