@@ -105,8 +105,8 @@ def test_ascent_direction_is_shifted_not_abandoned(compiled):
     """Far from the optimum the Hessian of S can be indefinite and Newton's step climb S.
     At the chord guess of the double pendulum over T = 3 it does (R·d > 0); the descent
     step must then shift the Hessian until it descends, and return a path of lower cost,
-    not give up and hand over to the residual-norm line search, which climbs S (that
-    interleaving took 136 iterations over this horizon)."""
+    not give up and hand over to the residual-norm line search, which climbs S (with
+    that interleaving Newton stalled here after 179 iterations)."""
     mod = compiled("double_pendulum_oc")
     problem, path, res, ab, bw = chord_problem(mod, 300, 3.0)
     delta = problem.solve(ab, bw, -res)
