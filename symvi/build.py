@@ -121,7 +121,7 @@ def _info(dm: DerivedModel, key: str, description: str) -> dict:
         "defaults": list(dm.defaults), "has_energy": dm.has_energy,
         "whole_trajectory": dm.whole_trajectory, "constraints": dm.constraint_count,
         "controls": dm.control_count, "step_scaled": list(dm.step_scaled),
-        "symmetries": list(dm.symmetries),
+        "symmetries": list(dm.symmetries), "gauges": list(dm.gauges),
         "symvi_version": __version__, "key": key,
         "configuration_dim": dm.c_context["configuration_dim"],
         "matrix_dims": [G["matrix_dim"] for G in dm.c_context["groups"]],

@@ -15,9 +15,22 @@ when underactuated (§3.3.2). :func:`optimal_control` builds that problem as a
 :class:`~symvi.model.Model` with constraints; the groupoid's second-order rule discretises
 L̃ and Φ (DESIGN.md §3) and the whole-trajectory solve finds the optimal path, its
 multipliers and the controls u_k = EL(L)_a at each window's quadrature point.
+
+That is the paper's discretisation (``equations="paper"``). The alternative
+``equations="variational"`` discretises the controlled equations themselves, as the forced
+discrete Euler–Lagrange equations of the first-order L_d of L (discrete mechanics and
+optimal control): on the window (g_{k−1}, g_k, g_{k+1}), D_k = the node variation of
+L_d(g_{k−1}, g_k) + L_d(g_k, g_{k+1}) at g_k (paper §2.2), u_k = −D_{k,a}/h, Φ^A_d = −D_{k,A}
+and L̃_d = h C(q, y, u_k). Its discrete Noether identity is exact: for a symmetry Z of L
+with no actuated component, Σ_k Z(x_k)·Φ_d^k telescopes to boundary terms, so the
+constraints are exactly dependent and the multipliers are fixed only up to λ^k + c Z(x_k).
+The compiled ``gauge`` kernel lets the solver fix c (:mod:`symvi._runtime.gauge`), where
+with the paper's rule the identity holds only to O(h⁴) and the optimality system is
+singular in double precision from N ≈ 100 (tests/test_constraint_degeneracy.py).
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from typing import Any, Mapping, Sequence
 
 import sympy as sp
@@ -25,6 +38,27 @@ import sympy as sp
 from .errors import ModelError
 from .groupoids.base import Algebroid, Groupoid
 from .model import Example, Model, _scalar
+from .symmetry import Symmetry
+
+#: How the controlled equations are discretised (see the module docstring).
+EQUATIONS = ("paper", "variational")
+
+
+@dataclass(frozen=True)
+class ControlSystem:
+    """The controlled mechanical system behind an optimal-control :class:`Model` (paper
+    §3.3.1): Lagrangian L(q, y), cost C(q, y, u), one control symbol per actuated fibre
+    direction, and the discretisation of its controlled equations (:data:`EQUATIONS`)."""
+
+    lagrangian: sp.Expr
+    cost: sp.Expr
+    controls: tuple[sp.Symbol, ...]
+    actuated: tuple[int, ...]
+    equations: str = "paper"
+
+    def fingerprint(self) -> str:
+        return ":".join([self.equations, sp.srepr(self.lagrangian), sp.srepr(self.cost),
+                         sp.srepr(self.controls), repr(self.actuated)])
 
 
 def euler_lagrange_operator(algebroid: Algebroid, lagrangian: sp.Expr) -> sp.Matrix:
@@ -78,7 +112,8 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
                     controls: Sequence[Any] | str, actuated: Sequence[int] | None = None,
                     parameters: Mapping[Any, float] | None = None,
                     discretisation: str | None = None, example: Example | None = None,
-                    description: str = "") -> Model:
+                    description: str = "", equations: str = "paper",
+                    symmetries: Sequence[Symmetry] = ()) -> Model:
     """The optimal-control problem min ∫ C(q, y, u) dt of a mechanical system on the
     algebroid of ``groupoid``, as a constrained second-order :class:`Model`.
 
@@ -95,10 +130,18 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
     actuated:
         Indices a of the actuated fibre directions (default: all). The others give the
         constraints Φ^A = EL(L)_A = 0 (an underactuated system, paper §3.3.2).
-    parameters, discretisation, example, description:
+    parameters, discretisation, example, description, symmetries:
         As for :class:`Model` (the discretisation defaults to the groupoid's second-order
         rule).
+    equations:
+        ``"paper"``: L̃ and Φ discretised by the rule (paper §3.3); ``"variational"``: the
+        forced discrete Euler–Lagrange equations of the first-order L_d of L (module
+        docstring). With ``"variational"``, a symmetry of L with no actuated component
+        makes the constraints exactly dependent, and the solver fixes the multipliers'
+        freedom it leaves.
     """
+    if equations not in EQUATIONS:
+        raise ModelError(f"equations must be one of {EQUATIONS}, got {equations!r}")
     algebroid = groupoid.algebroid()
     parameters = dict(parameters or {})
     L = _scalar(lagrangian, "Lagrangian")
@@ -125,4 +168,5 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
         discretisation=discretisation or groupoid.default_discretisation(2),
         parameters=parameters, example=example, description=description,
         constraints=[EL[A] for A in range(len(EL)) if A not in directions],
-        controls=forces)
+        controls=forces, symmetries=symmetries,
+        control_system=ControlSystem(L, C, u, directions, equations))

@@ -78,6 +78,9 @@ class DerivedModel:
     step_scaled: tuple[bool, ...] = ()
     #: Names of the conserved quantities F_Z of the ``noether`` kernel.
     symmetries: tuple[str, ...] = ()
+    #: Names of the symmetries on which the constraints depend exactly (the ``gauge``
+    #: kernel's rows).
+    gauges: tuple[str, ...] = ()
 
     @property
     def stencil_elements(self) -> int:
@@ -236,6 +239,13 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
             "constraint", window.z, (("value", phi), ("jacobian", window.total_jacobian(phi))),
             "discrete constraints Phi_d on one window and their Jacobian",
             window.definitions + window.jacobian_definitions))
+    if dm.gauges:
+        sections = [c for _, z in dm.gauges for c in z]
+        kernels.append(Kernel(
+            "gauge", window.z, (("value", engine.window_values(window, 0, sections)),),
+            "sections Z of the symmetries on which the constraints depend exactly, at the "
+            "window's middle node (one row of constraint components per symmetry)",
+            window.definitions))
     if dm.controls:
         kernels.append(Kernel("controls", window.z,
                               (("value", engine.window_values(window, 0, dm.controls)),),
@@ -397,5 +407,5 @@ def derive(dm: DiscreteModel) -> DerivedModel:
                         step_scaled=tuple(g.step_scaled()),
                         symmetries=tuple(z.name for z in dm.symmetries)
                         if any(k.name == "noether" for k in kernels) else (),
-                        c_context=g.c_context(),
+                        gauges=tuple(name for name, _ in dm.gauges), c_context=g.c_context(),
                         coefficients=tuple(sorted(coefficients, key=lambda c: c.__name__)))

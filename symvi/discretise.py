@@ -88,6 +88,11 @@ class DiscreteModel:
     controls: tuple[sp.Expr, ...] = ()
     #: Declared Noether symmetries (:class:`symvi.symmetry.Symmetry`, base coordinates).
     symmetries: tuple = ()
+    #: (name, Z_A) per symmetry Z that makes the constraints exactly dependent (variational
+    #: controlled equations, Z without actuated components): Z's components along the
+    #: constraints at the window's middle node x₁. The multipliers are then fixed only up
+    #: to λ^k + c Z(x_k) (:mod:`symvi.control`).
+    gauges: tuple[tuple[str, tuple[sp.Expr, ...]], ...] = ()
 
 
 def slot_symbols(groupoid: Groupoid, order: int) -> tuple[Slot, ...]:
@@ -103,7 +108,13 @@ def discretise(model: "Model") -> DiscreteModel:
     g = model.groupoid
     slots = slot_symbols(g, model.order)
     xs, fs = [s[0] for s in slots], [s[1] for s in slots]
-    if model.lagrangian is not None:
+    system = model.control_system
+    gauges = ()
+    if system is not None and system.equations == "variational":
+        Ld, constraints, controls = _variational_control(system, g, RULES[model.discretisation],
+                                                         xs, fs)
+        gauges = _gauges(model, system, xs[1])
+    elif model.lagrangian is not None:
         rule = RULES[model.discretisation]
         Ld = rule.build(g, model.lagrangian, xs, fs, h)
         constraints = tuple(rule.build(g, c, xs, fs, h) for c in model.constraints)
@@ -119,4 +130,71 @@ def discretise(model: "Model") -> DiscreteModel:
                          continuous_lagrangian=model.lagrangian,
                          fingerprint=model.fingerprint(), constraints=constraints,
                          multipliers=multipliers, controls=controls,
-                         symmetries=tuple(model.symmetries))
+                         symmetries=tuple(model.symmetries), gauges=gauges)
+
+
+def node_variation(groupoid: Groupoid, lagrangian: sp.Expr, rule: Rule, xs, fs) -> sp.Matrix:
+    """The discrete Euler–Lagrange expression of the first-order L_d = ``rule``(L) at the
+    node shared by the elements (xs[0], fs[0]) and (xs[1], fs[1]) (paper §2.2): the
+    variation of L_d(g₀) + L_d(g₁) when that node moves, right(g₀)ᵀ∇L_d(g₀) +
+    left(g₁)ᵀ∇L_d(g₁).
+
+    Each L_d is written with its element's target as a named point e: moving the node
+    moves e₀ = xs[1] as it moves the node's base point (the base rows of left(g₁)) and
+    leaves e₁ = β(g₁) fixed. The chain rule through e keeps β, a rational function of f
+    on an action groupoid, out of every derivative.
+    """
+    m = groupoid.source_dim
+    ends = [tuple(sp.Dummy(f"e{j}_{i}", real=True) for i in range(m)) for j in range(2)]
+    parts = [rule.build(groupoid, lagrangian, [x, e], [f], h) for x, e, f in zip(xs, ends, fs)]
+    grads = [sp.Matrix([sp.diff(Ld, s) for s in tuple(x) + tuple(f)])
+             for Ld, x, f in zip(parts, xs, fs)]
+    left = groupoid.left(xs[1], fs[1], h)
+    total = groupoid.right(xs[0], fs[0], h).T * grads[0] + left.T * grads[1]
+    if m:
+        total += left[:m, :].T * sp.Matrix([sp.diff(parts[0], e) for e in ends[0]])
+    beta = groupoid.target(xs[1], fs[1], h)
+    return total.xreplace(dict(zip(ends[0], xs[1])) | dict(zip(ends[1], beta)))
+
+
+def _variational_control(system, g: Groupoid, rule: Rule, xs, fs):
+    """(L̃_d, Φ_d, u_d) on one window from the forced discrete Euler–Lagrange equations of
+    the first-order L_d of the mechanical Lagrangian (:mod:`symvi.control`): with D the
+    node variation, u = −D_a/h on the actuated directions, Φ_d = −D_A on the others
+    (both ≈ EL(L), resp. h·EL(L), as the paper's rule gives them) and L̃_d the rule's
+    quadrature of the cost at u."""
+    D = node_variation(g, system.lagrangian, RULES[g.default_discretisation(1)], xs, fs)
+    controls = tuple(-D[a] / h for a in system.actuated)
+    constraints = tuple(-D[A] for A in range(g.fibre_dim) if A not in system.actuated)
+    Ld = rule.build(g, system.cost, xs, fs, h).xreplace(dict(zip(system.controls, controls)))
+    return Ld, constraints, controls
+
+
+def mechanical_model(model: "Model") -> DiscreteModel:
+    """The first-order L_d of an optimal-control model's mechanical Lagrangian L (the
+    groupoid's first-order rule), with the symmetries that make its variational
+    constraints dependent: :mod:`symvi.checks.noether` verifies their invariance there."""
+    system, g = model.control_system, model.groupoid
+    (X, F), = slots = slot_symbols(g, 1)
+    rule = RULES[g.default_discretisation(1)]
+    names = {name for name, _ in _gauges(model, system, X)}
+    return DiscreteModel(name=model.name, groupoid=g, order=1, slots=slots,
+                         lagrangian=rule.build(g, system.lagrangian, [X], [F], h), step=h,
+                         parameters=model.parameter_symbols, defaults=model.parameter_defaults,
+                         continuous_lagrangian=system.lagrangian,
+                         fingerprint=model.fingerprint(),
+                         symmetries=tuple(z for z in model.symmetries if z.name in names))
+
+
+def _gauges(model: "Model", system, x_middle) -> tuple[tuple[str, tuple[sp.Expr, ...]], ...]:
+    """Each declared symmetry without actuated components, restricted to the unactuated
+    directions at the window's middle node: the exact dependencies of Φ_d. A symmetry
+    with a potential is left out (its identity involves the potential)."""
+    at_node = dict(zip(model.groupoid.algebroid().q, x_middle))
+    out = []
+    for z in model.symmetries:
+        if z.potential != 0 or any(z.section[a] != 0 for a in system.actuated):
+            continue
+        out.append((z.name, tuple(c.xreplace(at_node) for A, c in enumerate(z.section)
+                                  if A not in system.actuated)))
+    return tuple(out)

@@ -121,6 +121,9 @@ class Model:
         Noether symmetries (:class:`symvi.symmetry.Symmetry`): their conserved quantities
         F_Z are compiled (``StepResult.noether``) and ``symvi check`` verifies the
         invariance (paper §4.4).
+    control_system:
+        Set by :func:`symvi.optimal_control`: the controlled system
+        (:class:`symvi.control.ControlSystem`) the Lagrangian and constraints come from.
     """
 
     name: str
@@ -135,6 +138,7 @@ class Model:
     constraints: Sequence[Any] = ()
     controls: Sequence[Any] = ()
     symmetries: Sequence[Symmetry] = ()
+    control_system: Any = None
 
     def __post_init__(self) -> None:
         if not isinstance(self.name, str) or not self.name.isidentifier() \
@@ -301,6 +305,7 @@ class Model:
         params = ";".join(f"{s}={v!r}" for s, v in self.parameters)
         extras = [sp.srepr(e) for e in self.constraints] + ["|"] \
             + [sp.srepr(e) for e in self.controls] + ["|"] \
-            + [f"{z.name}:{sp.srepr(z.section)}:{sp.srepr(z.potential)}" for z in self.symmetries]
+            + [f"{z.name}:{sp.srepr(z.section)}:{sp.srepr(z.potential)}" for z in self.symmetries] \
+            + ([self.control_system.fingerprint()] if self.control_system is not None else [])
         return "\n".join([self.name, self.groupoid.fingerprint(), str(self.discretisation),
                           str(self.order), sp.srepr(body), params] + extras)

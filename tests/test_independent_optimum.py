@@ -37,11 +37,13 @@ import time
 
 import numpy as np
 import pytest
+from scipy.linalg import null_space
 from scipy.optimize import minimize
 
 from symvi.models import get
 from symvi.models import heavy_top_rotors_oc
 from so3 import cay, cay_inv, hat, vee
+from top_equations import variational_terms
 
 FTOL, MAXITER = 1e-12, 500
 CS = 1e-30          # complex-step size: derivatives exact to rounding
@@ -268,6 +270,36 @@ class HeavyTopRotors(RigidBody):
         return super().defect(z[..., :3 * (self.N - 2)])
 
 
+class HeavyTopRotorsVariational(HeavyTopRotors):
+    """The same system with the variational controlled equations of :mod:`top_equations`
+    (node k between elements k−1 and k, window w = k − 1): u = (π_k − π_{k−1})/h and Φ the
+    forced discrete Euler–Lagrange equations of the top.
+
+    Σ_w Γ_w·Φ_w telescopes to the ends' vertical momenta, so the constraints are exactly
+    dependent, and SLSQP's least-squares subproblems stall on that: the middle window keeps
+    only the components of Φ across two fixed vectors orthogonal to its Γ at symvi's
+    solution (any pair completing Γ to a basis would do). The full Φ is checked after."""
+
+    def from_symvi(self, r):
+        z = super().from_symvi(r)
+        self.middle = (self.N - 2) // 2
+        self.across = null_space(r.x[self.middle + 1, :3][None])
+        return z
+
+    def constraints(self, z):
+        phi, w = self.h * self.phi(z), self.middle
+        kept = [phi[..., :w, :], phi[..., w:w + 1, :] @ self.across, phi[..., w + 1:, :]]
+        return np.concatenate([k.reshape(k.shape[:-2] + (-1,)) for k in kept]
+                              + [self.defect(z)], -1)
+
+    def equations(self, z):
+        xi, th, gam = self.unpack(z)
+        rate = (th[..., 1:, :] - th[..., :-1, :]) / self.h
+        u, phi = variational_terms(self.p, xi[..., :-1, :], xi[..., 1:, :], rate[..., :-1, :],
+                                   rate[..., 1:, :], gam[..., 1:-1, :], self.h)
+        return (np.stack([sum(t) for t in u], -1), np.stack([sum(t) for t in phi], -1))
+
+
 # ---------------------------------------------------------------------------------------
 # Direct minimisation
 # ---------------------------------------------------------------------------------------
@@ -316,6 +348,7 @@ def direct_minimum(prob, z0):
 
 
 CASES = [("rigid_body_oc", RigidBody, 30), ("heavy_top_rotors_oc", HeavyTopRotors, 40),
+         ("heavy_top_rotors_oc_variational", HeavyTopRotorsVariational, 40),
          ("double_pendulum_oc", DoublePendulum, 50), ("cart_pole_oc", CartPole, 60)]
 
 

@@ -13,7 +13,8 @@ SciPy's rotation vector as exp⁻¹, and the controlled equations EL(L) written 
 2. Discrete controlled equations: the controls returned are EL(L)_a at every window's
    quadrature point (Ω = mean of ξ, Ω̇ = Δξ/h, Γ at the middle node; q = mean of three
    nodes, q̇ and q̈ central differences), the unactuated equations EL(L)_A = 0 hold there,
-   and the cost is Σ_w h·C(u_w).
+   and the cost is Σ_w h·C(u_w). With variational equations (``*_variational``) they are
+   the forced discrete Euler–Lagrange equations of :mod:`top_equations` instead.
 3. The optimal rigid-body cost converges at order 2 to the continuous optimum of the
    horizon [h/2, T − h/2] that the discrete rest conditions impose (order 1 to that of T).
 4. Bad input and failures are reported (ValueError, ModelError, statuses, NewtonError).
@@ -31,6 +32,7 @@ from scipy.spatial.transform import Rotation
 from symvi import ModelError, PairGroupoid, optimal_control
 from symvi.models import CONTROL, get
 from so3 import I3, cay, cay_inv, hat, vee
+from top_equations import variational_terms
 
 U = np.finfo(float).eps
 N_ORACLE = 48          # steps of the oracle's and the equations' solutions
@@ -81,6 +83,7 @@ def quadrature_points(name, r, h) -> dict:
         pts["dq"], pts["ddq"] = (q[2:] - q[:-2]) / (2 * h), (q[2:] - 2 * q[1:-1] + q[:-2]) / h**2
     if kind(name) == "top":
         pts["Gam"] = r.x[1:-1, :3]
+    pts["h"] = h
     return pts
 
 
@@ -95,6 +98,12 @@ def physics(name, p, pts):
         plus, minus = Om[:, c1] * IOm[:, c2], Om[:, c2] * IOm[:, c1]
         u = [[I[i] * pts["dOm"][:, i], plus[:, i], -minus[:, i]] for i in range(3)]
         return u, None, lambda tq: 0.5 * ((tq / I) ** 2).sum(axis=1)
+    if kind(name) == "top" and name.endswith("_variational"):
+        h = pts["h"]                             # the window's two elements from the point
+        xi0, xi1 = pts["Om"] - h * pts["dOm"] / 2, pts["Om"] + h * pts["dOm"] / 2
+        rate0, rate1 = pts["dq"] - h * pts["ddq"] / 2, pts["dq"] + h * pts["ddq"] / 2
+        u, phi = variational_terms(p, xi0, xi1, rate0, rate1, pts["Gam"], h)
+        return u, phi, lambda uq: 0.5 * (uq**2).sum(axis=1)
     if kind(name) == "top":
         g1, g2, I3b, J1, J2, Mgh = (p[k] for k in ("gamma1", "gamma2", "I3bar", "J1", "J2", "Mgh"))
         (O1, O2, O3), (dO1, dO2, dO3) = pts["Om"].T, pts["dOm"].T
@@ -151,7 +160,8 @@ def top_path(name, p, N, h):
 
     def window(w, z):            # quadrature point of window w − 1 with ξ_w = z
         q = theta[w - 1:w + 2]
-        return dict(Om=(xi[w - 1] + z)[None] / 2, dOm=(z - xi[w - 1])[None] / h, Gam=G[w][None],
+        return dict(h=h, Om=(xi[w - 1] + z)[None] / 2, dOm=(z - xi[w - 1])[None] / h,
+                    Gam=G[w][None],
                     q=q.mean(axis=0)[None], dq=(q[2] - q[0])[None] / (2 * h),
                     ddq=(q[2] - 2 * q[1] + q[0])[None] / h**2)
 

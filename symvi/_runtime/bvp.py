@@ -12,6 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import arguments
+from .gauge import Gauge, check_boundary
 from .paths import Path, initial_path
 from .results import BVPResult, Status
 
@@ -33,6 +34,7 @@ class _Problem:
         self.minimise = bool(model.info.get("controls"))
         self.shift, self.penalty = 0.0, 0.0
         self._band = self._work = None   # reused: fresh pages are slow to touch at large N
+        self.gauge = None
 
     def merit(self, path: Path) -> tuple[float, float]:
         """The cost S = Σ L_d and the size of its rounding error."""
@@ -52,19 +54,25 @@ class _Problem:
         code = m.lib.symvi_bvp_assemble(m.ptr(path.x), m.ptr(path.f), m.ptr(path.lam), n_nodes,
                                         m.ptr(self.p), self.h, m.ptr(res),
                                         m.ptr(ab.T) if with_jacobian else m.ffi.NULL)
+        if with_jacobian and m.info.get("gauges"):
+            self.gauge = self.gauge or Gauge(m, n_nodes)
+            self.gauge.update(path, self.p, self.h)
         return res, ab, bw, code == 0
 
     def solve(self, ab, bw: int, rhs: np.ndarray, shift: float = 0.0,
               shifted: np.ndarray | None = None) -> np.ndarray:
         """Solve (J + shift·D) x = rhs with LAPACK's banded LU (dgbsv), J in the band
         storage of :meth:`assemble` (left intact: the work copy is factorised), D the
-        identity on the unknowns ``shifted`` (a mask; default all)."""
+        identity on the unknowns ``shifted`` (a mask; default all). Exactly dependent
+        constraints are replaced by their gauge condition (:mod:`.gauge`)."""
         from scipy.linalg import LinAlgError
         from scipy.linalg.lapack import dgbsv
 
         np.copyto(self._work, ab)
         if shift:
             self._work[2 * bw] += shift if shifted is None else shift * shifted
+        if self.gauge:
+            rhs = self.gauge.apply(self._work, bw, rhs)
         _, _, x, info = dgbsv(bw, bw, self._work, rhs, overwrite_ab=True)
         if info != 0:
             raise LinAlgError(f"dgbsv: singular at column {info}" if info > 0 else "dgbsv")
@@ -77,6 +85,19 @@ class _Problem:
                                       m.ptr(trial.lam), m.ptr(delta), alpha, path.x.shape[0],
                                       m.ptr(self.p), self.h, failed)
         return trial if code == 0 else None
+
+    def perturbed(self, path: Path) -> Path:
+        """``path`` with every free node moved by a fixed pseudo-random variation of size
+        1e-2 (its ends kept): a second path between the same ends."""
+        r, blocks = self.model.order, self._blocks(path)
+        delta = 1e-2 * np.random.default_rng(0).uniform(-1.0, 1.0, (len(blocks), self.model.n
+                                                                     + self.model.constraints))
+        delta[(blocks < r) | (blocks > path.x.shape[0] - 1 - r)] = 0.0
+        moved = self.moved(path, delta.reshape(-1), 1.0)
+        moved = self.moved(path, delta, 1.0)
+        if moved is None:
+            raise ValueError("cannot vary the initial path to check the declared symmetries")
+        return moved
 
     def size(self, path: Path) -> float:
         """Scale of the unknowns for the relative step tolerance."""
@@ -152,8 +173,10 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
     path = initial_path(model, start, end, N, guess, p, h)
     if isinstance(path, BVPResult):
         return path.raise_for_status() if raise_on_failure else path
-    path, norms, steps, status, message = _newton(_Problem(model, p, h), path, maxiter, xtol,
-                                                  ftol)
+    problem = _Problem(model, p, h)
+    if info.get("gauges"):
+        check_boundary(model, path, problem.perturbed(path), p, h)
+    path, norms, steps, status, message = _newton(problem, path, maxiter, xtol, ftol)
     if status == Status.SUCCESS:
         message = (f"converged in {len(steps)} Newton iterations, residual norm "
                    f"{norms[-1]:.3e}{message}")

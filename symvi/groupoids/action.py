@@ -186,11 +186,13 @@ class ActionGroupoid(Groupoid):
 
     def quadrature(self, rule, xs, fs, h):
         """``lie``: trapezoid in the base, h/2 [l(q_0, ξ) + l(q_1, ξ)] (symmetric, order 2);
-        ``lie_midpoint``: the base point at the middle node of the two elements."""
+        ``lie_midpoint``: the base point at the middle node of the two elements. A base
+        point after the last element, when given (``len(xs) > len(fs)``), is used as its
+        target instead of β(x, f), so that derivatives can go through it by the chain rule."""
         algebra = self.group.algebra_point(fs, h)
         if rule == "lie_midpoint":
             return [(1, dict(zip(self.q, xs[1])) | algebra)]
-        q1 = self.target(xs[0], fs[0], h)
+        q1 = xs[1] if len(xs) > len(fs) else self.target(xs[0], fs[0], h)
         return [(sp.S.Half, dict(zip(self.q, xs[0])) | algebra),
                 (sp.S.Half, dict(zip(self.q, q1)) | algebra)]
 
