@@ -195,6 +195,8 @@ def _gauges(model: "Model", system, x_middle) -> tuple[tuple[str, tuple[sp.Expr,
     for z in model.symmetries:
         if z.potential != 0 or any(z.section[a] != 0 for a in system.actuated):
             continue
-        out.append((z.name, tuple(c.xreplace(at_node) for A, c in enumerate(z.section)
-                                  if A not in system.actuated)))
+        section = tuple(c.xreplace(at_node) for A, c in enumerate(z.section)
+                        if A not in system.actuated)
+        if any(c != 0 for c in section):
+            out.append((z.name, section))
     return tuple(out)

@@ -94,7 +94,6 @@ class _Problem:
                                                                      + self.model.constraints))
         delta[(blocks < r) | (blocks > path.x.shape[0] - 1 - r)] = 0.0
         moved = self.moved(path, delta.reshape(-1), 1.0)
-        moved = self.moved(path, delta, 1.0)
         if moved is None:
             raise ValueError("cannot vary the initial path to check the declared symmetries")
         return moved
