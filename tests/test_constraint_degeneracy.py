@@ -22,19 +22,31 @@ from test_optimal_control import top_path
 NAME = "heavy_top_rotors_oc"
 
 
-def constraint_jacobian(mod, n_steps: int):
-    """(J_Φ dense, v): the constraint rows of the assembled Jacobian over the node
-    unknowns at the feasible path of ``n_steps`` steps, and v = Γ at the middle node of
-    every window, in the same row layout."""
-    ex, p = get(NAME).example, mod.model.params(None)
+def path_through(mod, x, g, h):
+    """The run-time Path with the nodes (x, g), its ends fixed as a solve would take them."""
+    p = mod.model.params(None)
+    return runtime_of(mod, "paths").initial_path(
+        mod.model, (x[:2], g[:2]), (x[-2:], g[-2:]), len(g) - 1, (x[2:-2], g[2:-2]), p, h)
+
+
+def feasible_system(mod, n_steps: int):
+    """(problem, path, res, ab, bw): the Newton system assembled at the feasible
+    non-planar path of ``n_steps`` steps over the example's horizon (mod's own Φ_d)."""
+    name, p = mod.model.name, mod.model.params(None)
+    ex = get(name).example
     h = ex.n_steps * ex.h / n_steps
-    x, g = top_path(NAME, dict(zip(mod.model.parameter_names, p)), n_steps, h)
-    path = runtime_of(mod, "paths").initial_path(
-        mod.model, (x[:2], g[:2]), (x[-2:], g[-2:]), n_steps, (x[2:-2], g[2:-2]), p, h)
+    x, g = top_path(name, dict(zip(mod.model.parameter_names, p)), n_steps, h)
+    path = path_through(mod, x, g, h)
     problem = runtime_of(mod, "bvp")._Problem(mod.model, p, h)
     res, ab, bw, finite = problem.assemble(path, True)
+    assert finite and np.abs(res[problem.constraint_rows(path)]).max() < 1e-10   # feasible
+    return problem, path, res, ab, bw
+
+
+def constraint_jacobian(problem, path, ab, bw):
+    """(J_Φ dense, v): the constraint rows of the assembled Jacobian over the node
+    unknowns, and v = Γ at the middle node of every window, in the same row layout."""
     rows = problem.constraint_rows(path)
-    assert finite and np.abs(res[rows]).max() < 1e-10     # the path is feasible
     # constraint block t holds window t − 1, whose middle node is t
     gamma = path.x[problem._blocks(path), :3].reshape(-1)
     return dense_jacobian(ab, bw)[rows][:, ~rows], gamma
@@ -46,7 +58,8 @@ def measured(compiled):
     between v and the left singular vector of σ_min)."""
     mod, out = compiled(NAME), {}
     for n_steps in (24, 48, 96):
-        jac, v = constraint_jacobian(mod, n_steps)
+        problem, path, _, ab, bw = feasible_system(mod, n_steps)
+        jac, v = constraint_jacobian(problem, path, ab, bw)
         left, sigma, _ = np.linalg.svd(jac)
         out[n_steps] = (np.linalg.norm(v @ jac) / np.linalg.norm(v) / sigma[0],
                         sigma[-1] / sigma[0], sigma[-2] / sigma[0],

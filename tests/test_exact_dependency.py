@@ -21,7 +21,8 @@ from symvi import Symmetry, compile_model, optimal_control
 from symvi.checks import check
 from symvi.models import get
 from so3 import cay, hat
-from test_bvp_merit import dense_jacobian, runtime_of
+from test_bvp_merit import dense_jacobian
+from test_constraint_degeneracy import constraint_jacobian, feasible_system, path_through
 from test_optimal_control import top_path
 
 NAME, PAPER = "heavy_top_rotors_oc_variational", "heavy_top_rotors_oc"
@@ -30,13 +31,6 @@ T = 2.0
 
 def parameters(mod) -> dict:
     return dict(zip(mod.model.parameter_names, mod.model.parameter_defaults))
-
-
-def path_through(mod, x, g, h):
-    """The run-time Path with the nodes (x, g), its ends fixed as a solve would take them."""
-    p = mod.model.params(None)
-    return runtime_of(mod, "paths").initial_path(
-        mod.model, (x[:2], g[:2]), (x[-2:], g[-2:]), len(g) - 1, (x[2:-2], g[2:-2]), p, h)
 
 
 def vertical_sum(mod, x, g, h) -> tuple[float, float]:
@@ -78,16 +72,9 @@ def spectra(compiled):
     the gauge), at the feasible non-planar path."""
     mod, out = compiled(NAME), {}
     for N in (24, 48, 96):
-        h, p = T / N, mod.model.params(None)
-        x, g = top_path(NAME, parameters(mod), N, h)
-        path = path_through(mod, x, g, h)
-        problem = runtime_of(mod, "bvp")._Problem(mod.model, p, h)
-        res, ab, bw, finite = problem.assemble(path, True)
-        rows = problem.constraint_rows(path)
-        assert finite and np.abs(res[rows]).max() < 1e-10        # feasible
-        J = dense_jacobian(ab, bw)
-        left, sigma, _ = np.linalg.svd(J[rows][:, ~rows])
-        gamma = path.x[problem._blocks(path), :3].reshape(-1)
+        problem, path, res, ab, bw = feasible_system(mod, N)
+        jac, gamma = constraint_jacobian(problem, path, ab, bw)
+        left, sigma, _ = np.linalg.svd(jac)
         gauged = ab.copy()
         problem.gauge.apply(gauged, bw, -res)
         full, fixed = (np.linalg.svd(dense_jacobian(a, bw), compute_uv=False) for a in (ab, gauged))

@@ -55,7 +55,8 @@ class _Problem:
                                         m.ptr(self.p), self.h, m.ptr(res),
                                         m.ptr(ab.T) if with_jacobian else m.ffi.NULL)
         if with_jacobian and m.info.get("gauges"):
-            self.gauge = self.gauge or Gauge(m, n_nodes)
+            if self.gauge is None:
+                self.gauge = Gauge(m, n_nodes)
             self.gauge.update(path, self.p, self.h)
         return res, ab, bw, code == 0
 
@@ -71,7 +72,7 @@ class _Problem:
         np.copyto(self._work, ab)
         if shift:
             self._work[2 * bw] += shift if shifted is None else shift * shifted
-        if self.gauge:
+        if self.gauge is not None:
             rhs = self.gauge.apply(self._work, bw, rhs)
         _, _, x, info = dgbsv(bw, bw, self._work, rhs, overwrite_ab=True)
         if info != 0:

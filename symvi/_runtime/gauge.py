@@ -35,9 +35,6 @@ class Gauge:
         self.rows = np.arange(s) + self.window * (n + s) + n
         self.projector = self.basis = self.lam = None
 
-    def __bool__(self) -> bool:
-        return self.count > 0
-
     def update(self, path, p, h) -> None:
         """Q and λ^w at ``path`` (the point where the Jacobian was assembled)."""
         w, s = self.window, self.model.constraints
@@ -68,7 +65,7 @@ class Gauge:
         return rhs
 
 
-def _vertical_sums(model, path, h, p) -> tuple[np.ndarray, np.ndarray]:
+def _dependency_sums(model, path, h, p) -> tuple[np.ndarray, np.ndarray]:
     """(Σ_k Z(x_k)·Φ_d^k, Σ_k |Z(x_k)·Φ_d^k|) per gauge symmetry along ``path``."""
     names = model.info["gauges"]
     phi = model.along_vector("constraint", path.x, path.f, h, p)
@@ -83,11 +80,9 @@ def check_boundary(model, path, other, p, h, tol: float = 1e-9) -> None:
     vanishes (the ends' discrete momenta agree, so that Φ_d = 0 has a solution). Both up to
     ``tol``·(1 + Σ_k |Z(x_k)·Φ_d^k|): below that the solve reaches a residual of the size
     of the mismatch, which it reports."""
-    names = model.info.get("gauges", ())
-    if not names:
-        return
-    (first, size), (second, size2) = _vertical_sums(model, path, h, p), \
-        _vertical_sums(model, other, h, p)
+    names = model.info["gauges"]
+    (first, size), (second, size2) = _dependency_sums(model, path, h, p), \
+        _dependency_sums(model, other, h, p)
     for k, name in enumerate(names):
         if abs(first[k] - second[k]) > tol * (1.0 + max(size[k], size2[k])):
             raise ValueError(
