@@ -392,6 +392,33 @@ def test_newton_out_of_iterations_reports_its_history(compiled):
     np.testing.assert_array_equal(info.value.result.residual_norms, r.residual_norms)
 
 
+def test_newton_matrix_conditioning_and_its_limit(compiled):
+    """The whole-trajectory Newton matrix of a second-order problem is a fourth-difference
+    operator: LAPACK's estimate of 1/κ (dgbcon) falls like N⁻⁴ (measured at the chord
+    guess). Past ε its solves are rounding noise — at N = 60 000 for the rigid body — and
+    a failed solve there names that cause; an ordinary failure (out of iterations at
+    N = 200) does not."""
+    from symvi._runtime.bvp import _Problem
+    from symvi._runtime.paths import initial_path
+
+    mod, ex = compiled("rigid_body_oc"), get("rigid_body_oc").example
+    rcond = {}
+    for N in (250, 500, 1000):
+        problem, p = _Problem(mod.model, mod.model.params(), 1.0 / N), mod.model.params()
+        path = initial_path(mod.model, ex.start, ex.end, N, None, p, 1.0 / N)
+        _, ab, bw, _ = problem.assemble(path, True)
+        rcond[N] = problem.reciprocal_condition(ab, bw)
+    orders = [math.log2(rcond[N] / rcond[2 * N]) for N in (250, 500)]
+    print(f"\n1/κ at N = 250, 500, 1000: {list(rcond.values())}; orders {orders}")
+    np.testing.assert_allclose(orders, 4.0, atol=0.3)
+    ordinary = mod.solve_bvp(ex.start, ex.end, 200, 1.0 / 200, maxiter=1)
+    assert not ordinary.success and "working precision" not in ordinary.message
+    N = 60_000
+    exhausted = mod.solve_bvp(ex.start, ex.end, N, 1.0 / N, maxiter=2)
+    assert exhausted.status == mod.Status.MAX_ITERATIONS
+    assert "singular to working precision" in exhausted.message, exhausted.message
+
+
 def test_failed_newton_records_the_residual_of_the_returned_path(compiled):
     """BVPResult documents residual_norms as "before each iteration and at the end": after
     k = 1, 2 iterations that end in MAX_ITERATIONS, the last entry (and the message) must be

@@ -79,6 +79,18 @@ class _Problem:
             raise LinAlgError(f"dgbsv: singular at column {info}" if info > 0 else "dgbsv")
         return x
 
+    def reciprocal_condition(self, ab, bw: int) -> float:
+        """LAPACK's estimate (dgbcon, 1-norm) of 1/κ of the Newton matrix of :meth:`solve`
+        without shift: below ε its solves are dominated by rounding."""
+        from scipy.linalg.lapack import dgbcon, dgbtrf
+
+        np.copyto(self._work, ab)
+        if self.gauge is not None:
+            self.gauge.apply(self._work, bw, np.zeros(self._work.shape[1]))
+        norm = float(np.abs(self._work[bw:]).sum(axis=0).max(initial=0.0))
+        lu, pivots, info = dgbtrf(self._work, bw, bw, overwrite_ab=True)
+        return 0.0 if info != 0 else float(dgbcon(bw, bw, lu, pivots, norm)[0])
+
     def moved(self, path: Path, delta, alpha):
         m, trial = self.model, path.copy()
         failed = m.ffi.new("long *")
@@ -139,7 +151,7 @@ class _Problem:
 
 
 def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=None,
-              maxiter: int = 50, xtol: float = 1e-12, ftol: float = 0.0,
+              maxiter: int = 100, xtol: float = 1e-12, ftol: float = 0.0,
               raise_on_failure: bool = False) -> BVPResult:
     """Solve for the free nodes (and multipliers) with the first and last r nodes fixed.
 
@@ -155,7 +167,9 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
         fixed ends (linear, resp. g_{r−1} τ(s·τ⁻¹(g_{r−1}⁻¹ g_{N−r+1})), base points
         moved along). Multipliers start at zero.
     maxiter, xtol, ftol : Newton stops when the update ‖Δ‖∞ ≤ xtol·(1 + size) or the
-        residual ‖R‖∞ ≤ ftol. Optimal-control problems are globalised on their cost
+        residual ‖R‖∞ ≤ ftol. The default of 100 iterations (SLSQP's) leaves room for
+        constrained problems started far from feasibility: the non-planar heavy top
+        from the chord guess takes 64–69. Optimal-control problems are globalised on their cost
         (with constraints: its ℓ1 exact penalty S + ν‖Φ_d‖₁) with a shifted Hessian and
         Armijo backtracking, other problems and the last steps by backtracking on ‖R‖₂.
     raise_on_failure : raise :class:`NewtonError` (carrying the failed result and its
@@ -181,11 +195,28 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
         message = (f"converged in {len(steps)} Newton iterations, residual norm "
                    f"{norms[-1]:.3e}{message}")
     else:
-        message += f"; residual norm {norms[-1]:.3e}"
+        message += f"; residual norm {norms[-1]:.3e}" + _conditioning(problem, path, status)
     result = _result(model, path, p, h, dict(
         t=h * np.arange(N + 1), iterations=len(steps), residual_norms=np.array(norms),
         step_norms=np.array(steps), status=status, message=message))
     return result.raise_for_status() if raise_on_failure else result
+
+
+def _conditioning(problem: _Problem, path: Path, status: Status) -> str:
+    """Why Newton failed, when the reason is double precision itself: the Newton matrix
+    at the returned path is singular to working precision (1/κ < ε). Its conditioning
+    grows like N^{2r} (differences of order 2r), so a large N can exhaust it — then the
+    solves are rounding noise and no globalisation helps."""
+    if status not in (Status.MAX_ITERATIONS, Status.STALLED):
+        return ""
+    _, ab, bw, finite = problem.assemble(path, True)
+    rcond = problem.reciprocal_condition(ab, bw) if finite else np.inf
+    if rcond >= np.finfo(float).eps:
+        return ""
+    r = problem.model.order
+    return (f"; the Newton matrix is singular to working precision (reciprocal condition "
+            f"number {rcond:.1e} < ε), so its solves are rounding noise: its conditioning "
+            f"grows like N^{2 * r} — use fewer steps")
 
 
 def _result(model, path: Path, p, h, common: dict) -> BVPResult:
