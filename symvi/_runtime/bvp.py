@@ -168,10 +168,11 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
         moved along). Multipliers start at zero.
     maxiter, xtol, ftol : Newton stops when the update ‖Δ‖∞ ≤ xtol·(1 + size) or the
         residual ‖R‖∞ ≤ ftol. The default of 100 iterations (SLSQP's) leaves room for
-        constrained problems started far from feasibility: the non-planar heavy top
-        from the chord guess takes 64–69. Optimal-control problems are globalised on their cost
-        (with constraints: its ℓ1 exact penalty S + ν‖Φ_d‖₁) with a shifted Hessian and
-        Armijo backtracking, other problems and the last steps by backtracking on ‖R‖₂.
+        constrained problems started far from feasibility: the non-planar heavy top from
+        the chord guess takes 64–69. Optimal-control problems are globalised on their
+        cost (with constraints: its ℓ1 exact penalty S + ν‖Φ_d‖₁) with a shifted Hessian
+        and Armijo backtracking, other problems and the last steps by backtracking on
+        ‖R‖₂.
     raise_on_failure : raise :class:`NewtonError` (carrying the failed result and its
         iteration history) instead of returning a failed result.
     """
@@ -215,8 +216,8 @@ def _conditioning(problem: _Problem, path: Path, status: Status) -> str:
         return ""
     r = problem.model.order
     return (f"; the Newton matrix is singular to working precision (reciprocal condition "
-            f"number {rcond:.1e} < ε), so its solves are rounding noise: its conditioning "
-            f"grows like N^{2 * r} — use fewer steps")
+            f"number {rcond:.1e} < ε), so rounding may dominate its solves: its "
+            f"conditioning grows like N^{2 * r} — use fewer steps")
 
 
 def _result(model, path: Path, p, h, common: dict) -> BVPResult:
