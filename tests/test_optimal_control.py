@@ -402,9 +402,9 @@ def test_newton_matrix_conditioning_and_its_limit(compiled):
     from symvi._runtime.paths import initial_path
 
     mod, ex = compiled("rigid_body_oc"), get("rigid_body_oc").example
-    rcond = {}
+    p, rcond = mod.model.params(), {}
     for N in (250, 500, 1000):
-        problem, p = _Problem(mod.model, mod.model.params(), 1.0 / N), mod.model.params()
+        problem = _Problem(mod.model, p, 1.0 / N)
         path = initial_path(mod.model, ex.start, ex.end, N, None, p, 1.0 / N)
         _, ab, bw, _ = problem.assemble(path, True)
         rcond[N] = problem.reciprocal_condition(ab, bw)

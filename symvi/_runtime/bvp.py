@@ -69,11 +69,7 @@ class _Problem:
         from scipy.linalg import LinAlgError
         from scipy.linalg.lapack import dgbsv
 
-        np.copyto(self._work, ab)
-        if shift:
-            self._work[2 * bw] += shift if shifted is None else shift * shifted
-        if self.gauge is not None:
-            rhs = self.gauge.apply(self._work, bw, rhs)
+        rhs = self._newton_matrix(ab, bw, rhs, shift, shifted)
         _, _, x, info = dgbsv(bw, bw, self._work, rhs, overwrite_ab=True)
         if info != 0:
             raise LinAlgError(f"dgbsv: singular at column {info}" if info > 0 else "dgbsv")
@@ -81,15 +77,22 @@ class _Problem:
 
     def reciprocal_condition(self, ab, bw: int) -> float:
         """LAPACK's estimate (dgbcon, 1-norm) of 1/κ of the Newton matrix of :meth:`solve`
-        without shift: below ε its solves are dominated by rounding."""
+        without shift: below ε rounding may dominate its solves."""
         from scipy.linalg.lapack import dgbcon, dgbtrf
 
-        np.copyto(self._work, ab)
-        if self.gauge is not None:
-            self.gauge.apply(self._work, bw, np.zeros(self._work.shape[1]))
+        self._newton_matrix(ab, bw, np.zeros(self._work.shape[1]))
         norm = float(np.abs(self._work[bw:]).sum(axis=0).max(initial=0.0))
         lu, pivots, info = dgbtrf(self._work, bw, bw, overwrite_ab=True)
         return 0.0 if info != 0 else float(dgbcon(bw, bw, lu, pivots, norm)[0])
+
+    def _newton_matrix(self, ab, bw: int, rhs: np.ndarray, shift: float = 0.0,
+                       shifted: np.ndarray | None = None) -> np.ndarray:
+        """Fill the work band with the matrix :meth:`solve` factorises (J, its shift, the
+        gauge rows); returns the matching right-hand side."""
+        np.copyto(self._work, ab)
+        if shift:
+            self._work[2 * bw] += shift if shifted is None else shift * shifted
+        return rhs if self.gauge is None else self.gauge.apply(self._work, bw, rhs)
 
     def moved(self, path: Path, delta, alpha):
         m, trial = self.model, path.copy()
@@ -206,8 +209,8 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
 def _conditioning(problem: _Problem, path: Path, status: Status) -> str:
     """Why Newton failed, when the reason is double precision itself: the Newton matrix
     at the returned path is singular to working precision (1/κ < ε). Its conditioning
-    grows like N^{2r} (differences of order 2r), so a large N can exhaust it — then the
-    solves are rounding noise and no globalisation helps."""
+    grows like N^{2r} (differences of order 2r), so a large N can exhaust it — then
+    rounding may dominate the solves and no globalisation helps."""
     if status not in (Status.MAX_ITERATIONS, Status.STALLED):
         return ""
     _, ab, bw, finite = problem.assemble(path, True)
