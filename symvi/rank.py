@@ -15,18 +15,21 @@ import sympy as sp
 def sequential_lambdify(args: Sequence[sp.Symbol],
                         definitions: Sequence[tuple[sp.Symbol, sp.Expr]], expr):
     """NumPy function of ``args`` computing ``expr``, which may use the symbols of
-    ``definitions`` — (symbol, expression) pairs evaluated in order first."""
-    args = list(args)
-    steps = [sp.lambdify(args + [d for d, _ in definitions[:i]], e, "numpy")
-             for i, (_, e) in enumerate(definitions)]
-    final = sp.lambdify(args + [d for d, _ in definitions], expr, "numpy", cse=True)
+    ``definitions`` — (symbol, expression) pairs evaluated in order first.
 
-    def evaluate(*values):
-        known = list(values)
-        for step in steps:
-            known.append(step(*known))
-        return final(*known)
-    return evaluate
+    One function whose body assigns the definitions, then the common subexpressions of
+    ``expr``: lambdify's ``cse`` hook takes the pairs as they are (one lambdify per
+    definition cost seconds on the SE(3) models). The definitions ride along in the
+    expression lambdify sees, so that it finds the implementations of the functions
+    they call (the exponential's coefficients).
+    """
+    definitions = list(definitions)
+
+    def with_definitions(exprs):
+        common, reduced = sp.cse(exprs[0], symbols=sp.numbered_symbols("_rank_cse"))
+        return definitions + common, reduced[0]
+    carried = (expr,) + tuple(e for _, e in definitions)
+    return sp.lambdify(list(args), carried, "numpy", cse=with_definitions)
 
 
 def generic_rank(matrix: sp.Matrix, symbols: Sequence[sp.Symbol],

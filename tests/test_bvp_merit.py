@@ -38,8 +38,8 @@ def chord_problem(mod, n_steps: int, horizon: float):
     data over ``horizon`` in ``n_steps`` steps."""
     ex = get(mod.model.name).example
     h, p = horizon / n_steps, mod.model.params(None)
-    path = runtime_of(mod, "paths").initial_path(mod.model, ex.start, ex.end, n_steps, None,
-                                                 p, h)
+    path = runtime_of(mod, "paths").initial_path(mod.model, ex.start, ex.end, n_steps,
+                                                 "chord", p, h)
     problem = runtime_of(mod, "bvp")._Problem(mod.model, p, h)
     res, ab, bw, finite = problem.assemble(path, True)
     assert finite

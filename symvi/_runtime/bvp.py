@@ -166,13 +166,16 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
         configurations (r, d, d) — a tuple of such arrays with several group factors.
         On an action groupoid the base points must follow the configurations.
     n_steps : N, the number of elements (N + 1 nodes).
-    guess : the free nodes r … N−r in the same layout; default: the chord between the
-        fixed ends (linear, resp. g_{r−1} τ(s·τ⁻¹(g_{r−1}⁻¹ g_{N−r+1})), base points
-        moved along). Multipliers start at zero.
+    guess : the free nodes r … N−r in the same layout, or how to interpolate them between
+        the fixed ends: ``"cubic"`` (default) matches the end velocities as well as the
+        positions (in τ-coordinates at g_{r−1} on groups, the base points moved along;
+        the chord when r = 1, as there are no end velocities), and
+        ``"chord"`` the positions only: g_{r−1} τ(s·τ⁻¹(g_{r−1}⁻¹ g_{N−r+1})).
+        Multipliers start at zero.
     maxiter, xtol, ftol : Newton stops when the update ‖Δ‖∞ ≤ xtol·(1 + size) or the
         residual ‖R‖∞ ≤ ftol. The default of 100 iterations (SLSQP's) leaves room for
         constrained problems started far from feasibility: the non-planar heavy top from
-        the chord guess takes 64–69. Optimal-control problems are globalised on their
+        the chord guess takes 52–73. Optimal-control problems are globalised on their
         cost (with constraints: its ℓ1 exact penalty S + ν‖Φ_d‖₁) with a shifted Hessian
         and Armijo backtracking, other problems and the last steps by backtracking on
         ‖R‖₂.
@@ -311,6 +314,10 @@ def _rounding_level(ab: np.ndarray, bw: int, u: np.ndarray) -> float:
 def _descent_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0**-12):
     """A descent step on the cost S = Σ L_d, or with constraints Φ_d on its ℓ1 exact
     penalty φ = S + ν‖Φ_d‖₁ (Nocedal & Wright §18.3, ν above the largest new multiplier).
+    ν may fall again, halfway per iteration (Powell's rule): far from feasibility the
+    first Newton steps can carry multipliers orders of magnitude above the solution's,
+    and a ν that only grew would leave φ blind to S (heavy top, rest to rest over a
+    vertical turn of 0.3 rad: no convergence in 300 iterations; with the rule, 208).
 
     The Newton (SQP) step keeps J_Φ d = −Φ_d, so φ's slope along it is
     R_η·d + λ·Φ_d − ν‖Φ_d‖₁ with R_η the node rows of the residual. When that is not
@@ -326,11 +333,14 @@ def _descent_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0**-1
     nodes, lam, phi_d = ~rows, problem.multipliers(state), res[rows]
     infeasibility = float(np.abs(phi_d).sum())
 
+    previous = problem.penalty
+
     def slope(delta):
-        """φ's slope along ``delta``, after raising ν above its new multipliers."""
+        """φ's slope along ``delta``, after setting ν by Powell's rule (1978):
+        ν = max(ν̂, (ν_previous + ν̂)/2), ν̂ = 1.5 max|λ + Δλ|."""
         if rows.any():
-            problem.penalty = max(problem.penalty,
-                                  1.5 * float(np.abs(lam + delta[rows]).max(initial=0.0)))
+            wanted = 1.5 * float(np.abs(lam + delta[rows]).max(initial=0.0))
+            problem.penalty = max(wanted, 0.5 * (previous + wanted))
         return float(res[nodes] @ delta[nodes] + lam @ phi_d) - problem.penalty * infeasibility
 
     cost, noise = problem.merit(state)

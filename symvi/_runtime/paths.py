@@ -81,13 +81,19 @@ def fibres(model, x, g, p, h, describe, f=None):
     return _failure(f"the increment of {describe(int(failed[0]))} {reason}", status)
 
 
-def interpolate(model, x, g, a: int, b: int, p, describe):
-    """Fill nodes a < j < b on the chord from node a to node b (in place), or fail."""
-    code = model.lib.symvi_path_interpolate(model.ptr(x), model.ptr(g), a, b, model.ptr(p))
+def interpolate(model, x, g, a: int, b: int, p, describe, cubic: bool = False):
+    """Fill nodes a < j < b (in place) on the chord from node a to node b or, ``cubic``,
+    on the cubic that also matches the velocities of nodes a − 1 → a and b → b + 1; or
+    fail (a failed BVPResult)."""
+    code = model.lib.symvi_path_interpolate(model.ptr(x), model.ptr(g), a, b, int(cubic),
+                                            model.ptr(p))
     if code == 0:
         return None
     status = Status(code)
     return _failure(f"the increment of {describe} {REASONS.get(status, 'failed')}", status)
+
+
+GUESSES = ("cubic", "chord")
 
 
 def check_consistent(model, x, f, p, h, what: str, tol: float = 1e-9) -> None:
@@ -109,22 +115,21 @@ def check_consistent(model, x, f, p, h, what: str, tol: float = 1e-9) -> None:
 def initial_path(model, start, end, N: int, guess, p, h):
     """The Path the Newton iteration starts from, or a failed BVPResult.
 
-    Fixed nodes 0…r−1 and N−r+1…N; free nodes from ``guess`` or, by default, on the chord
-    between nodes r−1 and N−r+1 (linear on a pair groupoid, g_{r−1} τ(s·τ⁻¹(g_{r−1}⁻¹
-    g_{N−r+1})) on a group, the base points moved along).
+    Fixed nodes 0…r−1 and N−r+1…N; free nodes from ``guess``: an array of them, or an
+    interpolation between nodes r−1 and N−r+1 (:func:`interpolate`): ``"cubic"`` (the
+    default) matches the boundary velocities too when r ≥ 2 — the chord would jump from
+    them to its own, a velocity jump of O(1) whose accelerations O(1/h) put the first
+    Newton iterate far from feasibility and its multipliers far from the solution's —
+    ``"chord"`` matches the positions only.
     """
     r = model.order
     sx, sg = nodes(model, start, r, "start")
     ex, eg = nodes(model, end, r, "end")
     count = N + 1 - 2 * r
-    if guess is None:
-        x = np.concatenate([sx, np.zeros((count, model.m)), ex])
-        g = np.concatenate([sg, np.zeros((count, sg.shape[1])), eg])
-        failed = interpolate(model, x, g, r - 1, N - r + 1, p,
-                             f"the default guess (pass guess=...): g_{r - 1}⁻¹ g_{N - r + 1}, "
-                             f"between the fixed ends,")
-        if failed is not None:
-            return failed
+    if guess is None or isinstance(guess, str):
+        x, g = _interpolated(model, (sx, sg), (ex, eg), count, guess or "cubic", p)
+        if isinstance(x, BVPResult):
+            return x
     else:
         gx, gg = nodes(model, guess, count, "guess of the free")
         x, g = np.concatenate([sx, gx, ex]), np.concatenate([sg, gg, eg])
@@ -135,6 +140,24 @@ def initial_path(model, start, end, N: int, guess, p, h):
     check_consistent(model, x, f, p, h, "boundary data or guess")
     windows = N + 1 - r if model.constraints else 0
     return Path(x, g, f, np.zeros((windows, model.constraints)))
+
+
+def _interpolated(model, start, end, count: int, kind: str, p):
+    """Nodes (x, g) with the free ones interpolated. Without end velocities (an end
+    element outside the retraction's chart: :func:`fibres` names it) the chord."""
+    if kind not in GUESSES:
+        raise ValueError(f"guess must be an array of the free nodes or one of {GUESSES}, "
+                         f"got {kind!r}")
+    r = model.order
+    x = np.concatenate([start[0], np.zeros((count, model.m)), end[0]])
+    g = np.concatenate([start[1], np.zeros((count, start[1].shape[1])), end[1]])
+    if kind == "cubic" and r >= 2 and interpolate(model, x, g, r - 1, count + r, p, "",
+                                                  cubic=True) is None:
+        return x, g
+    failed = interpolate(model, x, g, r - 1, count + r, p,
+                         f"the default guess (pass guess=...): g_{r - 1}⁻¹ g_{count + r}, "
+                         f"between the fixed ends,")
+    return (failed, None) if failed is not None else (x, g)
 
 
 def increments(model, g, h: float, params=None) -> np.ndarray:
