@@ -132,12 +132,12 @@ def test_non_planar_problem_converges_from_the_default_and_chord_guesses(compile
 @pytest.mark.parametrize("turn, N, maxiter", [(0.05, 40, 100), (0.3, 40, 300)])
 def test_rest_to_rest_turns_converge(compiled, turn, N, maxiter):
     """From rest upright to rest tilted by (0.2, 0.1, 0) then turned about the vertical,
-    rotors to (−1, 0.5), T = 2: a non-planar problem far from its guess (multipliers of
-    the first Newton steps ~10⁴, the solution's ~10³). The small turn converges within
-    the default maxiter; the larger one only with Powell's rule for the penalty ν, which
-    lets ν fall with the multipliers (208 iterations; none converged with a ν that only
-    grew). The result is a KKT point: residual at the rounding level, every window's
-    constraint met."""
+    rotors to (−1, 0.5), T = 2: a non-planar problem far from its guess (the second
+    Newton step asks for multipliers ~7·10⁴, the solution's are ~2·10³). The small turn
+    converges within the default maxiter; the larger one only with Powell's rule for the
+    penalty ν, which lets ν fall with the multipliers (208 iterations; none converged
+    with a ν that only grew). The result is a KKT point: residual at the rounding level,
+    every window's constraint met."""
     mod, h, e3 = compiled(NAME), T / N, np.array([0.0, 0.0, 1.0])
     R = Rotation.from_rotvec([0.0, 0.0, turn]) * Rotation.from_rotvec([0.2, 0.1, 0.0])
     R = R.as_matrix()

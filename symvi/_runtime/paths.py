@@ -93,9 +93,6 @@ def interpolate(model, x, g, a: int, b: int, p, describe, cubic: bool = False):
     return _failure(f"the increment of {describe} {REASONS.get(status, 'failed')}", status)
 
 
-GUESSES = ("cubic", "chord")
-
-
 def check_consistent(model, x, f, p, h, what: str, tol: float = 1e-9) -> None:
     """Raise ValueError when a base point is not the target of the element before it."""
     if model.m == 0:
@@ -127,9 +124,10 @@ def initial_path(model, start, end, N: int, guess, p, h):
     ex, eg = nodes(model, end, r, "end")
     count = N + 1 - 2 * r
     if guess is None or isinstance(guess, str):
-        x, g = _interpolated(model, (sx, sg), (ex, eg), count, guess or "cubic", p)
-        if isinstance(x, BVPResult):
-            return x
+        interpolated = _interpolated(model, (sx, sg), (ex, eg), count, guess or "cubic", p)
+        if isinstance(interpolated, BVPResult):
+            return interpolated
+        x, g = interpolated
     else:
         gx, gg = nodes(model, guess, count, "guess of the free")
         x, g = np.concatenate([sx, gx, ex]), np.concatenate([sg, gg, eg])
@@ -142,9 +140,13 @@ def initial_path(model, start, end, N: int, guess, p, h):
     return Path(x, g, f, np.zeros((windows, model.constraints)))
 
 
+GUESSES = ("cubic", "chord")
+
+
 def _interpolated(model, start, end, count: int, kind: str, p):
-    """Nodes (x, g) with the free ones interpolated. Without end velocities (an end
-    element outside the retraction's chart: :func:`fibres` names it) the chord."""
+    """Nodes (x, g) with the free ones interpolated, or a failed BVPResult. Without end
+    velocities (an end element outside the retraction's chart: :func:`fibres` then
+    names it) the chord."""
     if kind not in GUESSES:
         raise ValueError(f"guess must be an array of the free nodes or one of {GUESSES}, "
                          f"got {kind!r}")
@@ -155,9 +157,9 @@ def _interpolated(model, start, end, count: int, kind: str, p):
                                                   cubic=True) is None:
         return x, g
     failed = interpolate(model, x, g, r - 1, count + r, p,
-                         f"the default guess (pass guess=...): g_{r - 1}⁻¹ g_{count + r}, "
-                         f"between the fixed ends,")
-    return (failed, None) if failed is not None else (x, g)
+                         f"the initial guess (pass guess=... the free nodes): "
+                         f"g_{r - 1}⁻¹ g_{count + r}, between the fixed ends,")
+    return (x, g) if failed is None else failed
 
 
 def increments(model, g, h: float, params=None) -> np.ndarray:
