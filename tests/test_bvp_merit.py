@@ -129,3 +129,15 @@ def test_double_pendulum_over_a_longer_horizon_converges_to_a_minimum(compiled):
     hessian = (dense + dense.T) / 2
     assert np.abs(dense - dense.T).max() < 1e-8 * np.abs(dense).max()
     assert np.linalg.eigvalsh(hessian)[0] > 0.0
+
+
+def test_curvature_is_the_quadratic_form_of_the_node_block(compiled, newton_step):
+    """The descent step's curvature test reads d_ηᵀ(W + μI)d_η off the band storage: the
+    node block W of the dense Jacobian, d_η the step's node part."""
+    problem, path, res, delta = newton_step
+    _, ab, bw, _ = problem.assemble(path, True)
+    nodes = ~problem.constraint_rows(path)
+    W, d = dense_jacobian(ab, bw)[np.ix_(nodes, nodes)], delta[nodes]
+    bvp = runtime_of(compiled(NAME), "bvp")
+    assert bvp._curvature(ab, bw, delta, nodes, 0.5) == pytest.approx(d @ W @ d + 0.5 * d @ d,
+                                                                       rel=1e-12)
