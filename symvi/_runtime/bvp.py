@@ -342,7 +342,7 @@ def _descent_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0**-1
     μ shrinks again after full steps. While ν‖Φ_d‖₁ is large the slope is blind to W:
     steps into its negative curvature pass, are cut to α ≈ 2⁻⁸, and Newton settles on a
     saddle of S on the constraints (the 0.3 rad turn: 208 iterations to a KKT point with
-    curvature −4.6 on the constraints' tangent space; with the test, 26 to a minimum of
+    curvature −4.6 on the constraints' tangent space; with the test, 26–28 to a minimum of
     lower cost). This is the curvature test of inertia-free line searches (Chiang &
     Zavala 2016), standing in for the inertia of a symmetric indefinite factorisation,
     which LAPACK lacks for band matrices; it cannot exclude a saddle approached along
