@@ -130,19 +130,15 @@ def test_non_planar_problem_converges_from_the_default_and_chord_guesses(compile
                                    maxiter=150).success
 
 
-def tangent_curvatures(mod, result, N: int, h: float) -> np.ndarray:
+def tangent_curvatures(mod, result, h: float) -> np.ndarray:
     """Eigenvalues of the Hessian W of S + λ·Φ_d on the null space of A = ∂Φ_d/∂η (the
     constraints' tangent space; Nocedal & Wright, Theorem 12.6) at ``result``: all
     positive at a strict local minimum, some negative at a saddle. W and A are taken on
     the free nodes: the layout's first and last blocks carry the fixed nodes 1 and N − 1,
     whose rows are the identity."""
-    bvp, paths = runtime_of(mod, "bvp"), runtime_of(mod, "paths")
-    p = mod.model.params(None)
-    path = paths.initial_path(mod.model, (result.x[:2], result.g[:2]),
-                              (result.x[-2:], result.g[-2:]), N,
-                              (result.x[2:-2], result.g[2:-2]), p, h)
+    path = path_through(mod, result.x, result.g, h)
     path.lam[:] = result.multipliers
-    problem = bvp._Problem(mod.model, p, h)
+    problem = runtime_of(mod, "bvp")._Problem(mod.model, mod.model.params(None), h)
     J = dense_jacobian(*problem.assemble(path, True)[1:3])
     rows, n = problem.constraint_rows(path), mod.model.n
     free = ~rows
@@ -173,7 +169,7 @@ def test_rest_to_rest_turns_converge_to_minima(compiled, turn, N):
     assert r.success and r.residual_norms[-1] < 1e-8
     phi = mod.model.along("constraint", r.x, r.f, h)
     assert np.abs(phi).max() < 1e-9
-    curvatures = tangent_curvatures(mod, r, N, h)
+    curvatures = tangent_curvatures(mod, r, h)
     print(f"least curvature on the tangent space {curvatures[0]:.3e}")
     assert curvatures[0] > 0.0
 
