@@ -6,7 +6,8 @@ with the generated module, which needs numpy and cffi only.
 """
 __version__ = "0.1.0"
 
-from .errors import BuildError, CompilerNotFoundError, ModelError, SymviError  # noqa: E402
+from .errors import (BuildError, CacheWarning, CompilerNotFoundError,  # noqa: E402
+                     DamagedPackageError, ModelError, SymviError)
 from .groupoids import (SE2, SE3, SO3, ActionGroupoid, Groupoid, MatrixLieGroup,  # noqa: E402
                         PairGroupoid, ProductGroupoid)
 from .model import Example, Model, h  # noqa: E402
@@ -18,4 +19,5 @@ from .build import compile_model, load  # noqa: E402
 __all__ = ["Model", "Example", "Symmetry", "optimal_control", "euler_lagrange_operator", "PairGroupoid", "MatrixLieGroup", "ActionGroupoid",
            "ProductGroupoid", "SO3", "SE2", "SE3",
            "Groupoid", "h", "compile_model", "load",
-           "ModelError", "BuildError", "CompilerNotFoundError", "SymviError", "__version__"]
+           "ModelError", "BuildError", "CompilerNotFoundError", "DamagedPackageError",
+           "CacheWarning", "SymviError", "__version__"]

@@ -6,8 +6,10 @@ arguments).
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -17,11 +19,23 @@ from .errors import BuildError, ModelError
 from .models import BUNDLED, load
 
 
+def _to_stderr(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
+def _show_warning(message, category, filename, lineno, file=None, line=None) -> None:
+    """Warnings (e.g. a damaged cached build being rebuilt) as one line, no source."""
+    _to_stderr(f"symvi: warning: {message}")
+
+
 def _compile(args) -> int:
     from .build import compile_model
     model = load(args.model)
     start = time.perf_counter()
-    compile_model(model, args.output, force=args.force, verbose=args.verbose)
+    with warnings.catch_warnings():
+        warnings.showwarning = _show_warning
+        compile_model(model, args.output, force=args.force, verbose=args.verbose,
+                      timeout=args.timeout, progress=_to_stderr)
     target = Path(args.output) / model.name
     print(f"{model.name}: {target} ready in {time.perf_counter() - start:.2f} s "
           f"(import {model.name} with {args.output} on sys.path)")
@@ -44,7 +58,7 @@ def _run(args) -> int:
     if ex.whole_trajectory:
         return _solve(module, ex, steps, h)
     start = time.perf_counter()
-    result = module.integrate(ex.initial, steps, h)
+    result = module.integrate(ex.initial, steps, h, keep_every=args.keep_every)
     elapsed = time.perf_counter() - start
     print(f"integrate  {steps} steps, h = {h:g}, T = {steps * h:g}: {elapsed * 1e3:.1f} ms "
           f"({steps / max(elapsed, 1e-9):,.0f} steps/s)")
@@ -96,6 +110,17 @@ def _list(args) -> int:
     return 0
 
 
+def _seconds(text: str) -> float:
+    """``--timeout``'s value: a positive, finite number of seconds."""
+    try:
+        value = float(text)
+    except ValueError:
+        value = math.nan
+    if not (value > 0 and math.isfinite(value)):
+        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
+    return value
+
+
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="symvi", description="Compiler for structure-preserving "
                                 "integrators on Lie groupoids.")
@@ -105,14 +130,22 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument("model", help="a model file (.py defining `model`) or a bundled model name")
     c.add_argument("-o", "--output", default="generated", help="output directory")
     c.add_argument("--force", action="store_true", help="rebuild even if cached")
-    c.add_argument("--verbose", action="store_true", help="show the compiler's output")
+    c.add_argument("--verbose", action="store_true", help="show the compiler's output and "
+                                                         "the time of each stage")
+    c.add_argument("--timeout", type=_seconds, default=None, metavar="SECONDS",
+                   help="give up (exit 1) if the build takes longer, naming the stage "
+                        "that was running")
     c.set_defaults(func=_compile)
     r = sub.add_parser("run", help="compile MODEL and run its example (integrate, or "
                                    "solve the whole trajectory of an optimal-control problem)")
     r.add_argument("model")
     r.add_argument("-o", "--output", default="generated")
-    r.add_argument("--steps", type=int, default=None)
-    r.add_argument("--h", type=float, default=None)
+    r.add_argument("--steps", type=int, default=None,
+                   help="number of steps (N for a whole-trajectory example); default: the "
+                        "example's")
+    r.add_argument("--h", type=float, default=None, help="time step; default: the example's")
+    r.add_argument("--keep-every", type=int, default=1, metavar="K",
+                   help="store only every K-th node (long runs)")
     r.set_defaults(func=_run)
     k = sub.add_parser("check", help="run the derivation checks on MODEL (exit 0: all "
                                      "pass, 1: a check failed, 2: bad input)")
@@ -141,6 +174,15 @@ def main(argv: list[str] | None = None) -> int:
     except BuildError as exc:
         print(f"symvi: build failed: {exc}", file=sys.stderr)
         return 1
+    except MemoryError as exc:   # a request refused before allocating (with its estimate)
+        print(f"symvi: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:   # a file symvi did not expect to fail (the message names it)
+        print(f"symvi: error: {exc}", file=sys.stderr)
+        return 1
+    except KeyboardInterrupt:
+        print("symvi: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

@@ -37,8 +37,9 @@ import sympy as sp
 
 from .errors import ModelError
 from .groupoids.base import Algebroid, Groupoid
-from .model import Example, Model, _scalar
+from .model import Example, Model
 from .symmetry import Symmetry
+from .validation import scalar
 
 #: How the controlled equations are discretised (see the module docstring).
 EQUATIONS = ("paper", "variational")
@@ -144,7 +145,7 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
         raise ModelError(f"equations must be one of {EQUATIONS}, got {equations!r}")
     algebroid = groupoid.algebroid()
     parameters = dict(parameters or {})
-    L = _scalar(lagrangian, "Lagrangian")
+    L = scalar(lagrangian, "Lagrangian")
     known = set(groupoid.continuous_symbols(1)) | {
         sp.Symbol(k, real=True) if isinstance(k, str) else k for k in parameters}
     unknown = L.free_symbols - known
@@ -154,7 +155,7 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
                          f" and parameters")
     directions = _actuated(actuated, len(algebroid.y))
     u = _control_symbols(controls, len(directions))
-    C = _scalar(cost, "cost")
+    C = scalar(cost, "cost")
     unknown = C.free_symbols - known - set(u)
     if unknown:
         raise ModelError(f"undeclared symbol(s) {sorted(map(str, unknown))} in the cost of "

@@ -13,9 +13,11 @@ from pathlib import Path
 import jinja2
 import sympy as sp
 from sympy.printing.c import C99CodePrinter
+from sympy.printing.codeprinter import PrintMethodNotImplementedError
 
 from . import __version__
 from .derive import DerivedModel, Kernel
+from .errors import ModelError
 from .groupoids.analytic import THETA, AnalyticCoefficient, c_definition
 
 
@@ -117,13 +119,25 @@ def _render_kernel(kernel: Kernel, dm: DerivedModel) -> dict:
             "temporaries": temporaries, "outputs": outputs}
 
 
+def _printed(render, kernel: Kernel, dm: DerivedModel) -> dict:
+    """``render(kernel, dm)``, with a function C99 lacks reported as a ModelError."""
+    try:
+        return render(kernel, dm)
+    except PrintMethodNotImplementedError as exc:
+        missing = str(exc).splitlines()[0].rsplit(":", 1)[-1].strip()
+        raise ModelError(
+            f"model {dm.name!r}: kernel {kernel.name!r} ({kernel.doc}) needs the function "
+            f"{missing}, which C99 does not have; write the model with elementary functions "
+            f"(those of <math.h>)") from None
+
+
 def emit(dm: DerivedModel) -> CSource:
     """Render the C source and cffi declarations of a derived model."""
     env = environment()
     context = {
         "version": __version__, "name": dm.name, "m": dm.source_dim, "n": dm.fibre_dim,
         "K": dm.stencil_elements, "order": dm.order, "np": len(dm.parameters),
-        "kernels": [_render_kernel(k, dm) for k in dm.kernels],
+        "kernels": [_printed(_render_kernel, k, dm) for k in dm.kernels],
         "whole_trajectory": dm.whole_trajectory, "constraints": dm.constraint_count,
         "coefficients": [c_definition(c, ArrayPrinter({THETA: "theta"}))
                          for c in dm.coefficients],

@@ -19,3 +19,11 @@ class BuildError(SymviError, RuntimeError):
 
 class CompilerNotFoundError(BuildError):
     """No working C compiler is available to cffi."""
+
+
+class DamagedPackageError(SymviError, ImportError):
+    """A generated package's files do not match its manifest: recompile it."""
+
+
+class CacheWarning(UserWarning):
+    """A cached build was found damaged and is being rebuilt."""

@@ -13,7 +13,6 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
-import numpy as np
 import sympy as sp
 
 from .discretise import RULES, h, rule_names
@@ -21,6 +20,7 @@ from .errors import ModelError
 from .groupoids.base import Groupoid
 from .rank import generic_rank
 from .symmetry import Symmetry
+from .validation import check_model_name, check_smooth, scalar
 
 @dataclass(frozen=True)
 class Example:
@@ -65,19 +65,6 @@ def _sympify_parameters(parameters: Mapping[Any, float]) -> tuple[tuple[sp.Symbo
         if name == str(h):
             raise ModelError(f"parameter name {name!r} is reserved for the time step")
     return tuple(items)
-
-
-def _scalar(expr: Any, what: str) -> sp.Expr:
-    if isinstance(expr, (sp.MatrixBase, list, tuple, np.ndarray)):
-        shape = getattr(expr, "shape", (len(expr),))
-        raise ModelError(f"the {what} must be a scalar expression, got shape {tuple(shape)}")
-    try:
-        value = sp.sympify(expr)
-    except (sp.SympifyError, TypeError) as exc:
-        raise ModelError(f"the {what} is not a SymPy expression: {exc}") from None
-    if not isinstance(value, sp.Expr):
-        raise ModelError(f"the {what} must be a scalar expression, got {type(value).__name__}")
-    return value
 
 
 @dataclass(frozen=True, eq=False)
@@ -141,9 +128,7 @@ class Model:
     control_system: Any = None
 
     def __post_init__(self) -> None:
-        if not isinstance(self.name, str) or not self.name.isidentifier() \
-                or keyword.iskeyword(self.name) or self.name.startswith("_"):
-            raise ModelError(f"model name {self.name!r} must be a public Python identifier")
+        check_model_name(self.name)
         if not isinstance(self.groupoid, Groupoid):
             raise ModelError(f"groupoid must be a symvi Groupoid, got {type(self.groupoid).__name__}")
         object.__setattr__(self, "parameters", _sympify_parameters(dict(self.parameters)))
@@ -167,7 +152,10 @@ class Model:
     def parameter_defaults(self) -> tuple[float, ...]:
         return tuple(v for _, v in self.parameters)
 
-    def _check_symbols(self, expr: sp.Expr, allowed: Sequence[sp.Symbol], what: str) -> None:
+    def _check_symbols(self, expr: sp.Expr, allowed: Sequence[sp.Symbol], what: str,
+                       smooth: bool = True) -> None:
+        """Refuse undeclared symbols in ``expr`` and, if ``smooth``, kinks in the
+        coordinates (anything but the parameters)."""
         clash = set(self.parameter_symbols) & set(self.groupoid_symbols())
         if clash:
             raise ModelError(f"parameter(s) {sorted(map(str, clash))} clash with coordinate symbols")
@@ -178,12 +166,14 @@ class Model:
                 f"undeclared symbol(s) {names} in the {what} of model {self.name!r}; "
                 f"declare them as parameters or use the groupoid's symbols "
                 f"({', '.join(map(str, allowed))})")
+        if smooth:
+            check_smooth(expr, set(allowed) - set(self.parameter_symbols), what)
 
     def groupoid_symbols(self) -> tuple[sp.Symbol, ...]:
         return self.groupoid.continuous_symbols(2)
 
     def _validate_continuous(self) -> None:
-        L = _scalar(self.lagrangian, "Lagrangian")
+        L = scalar(self.lagrangian, "Lagrangian")
         object.__setattr__(self, "lagrangian", L)
         g = self.groupoid
         second = [s for s in g.leading_symbols(2) if s in L.free_symbols]
@@ -232,7 +222,7 @@ class Model:
                 f"singular as h → 0")
 
     def _validate_discrete(self) -> None:
-        Ld = _scalar(self.discrete_lagrangian, "discrete Lagrangian")
+        Ld = scalar(self.discrete_lagrangian, "discrete Lagrangian")
         object.__setattr__(self, "discrete_lagrangian", Ld)
         if self.discretisation is not None:
             raise ModelError("a discrete Lagrangian takes no `discretisation`")
@@ -255,9 +245,10 @@ class Model:
             values = getattr(self, field_name)
             if isinstance(values, (sp.Expr, str)) or not isinstance(values, (list, tuple, sp.MatrixBase)):
                 values = [values]
-            exprs = tuple(_scalar(v, f"{field_name[:-1]} {i}") for i, v in enumerate(values))
+            exprs = tuple(scalar(v, f"{field_name[:-1]} {i}") for i, v in enumerate(values))
             for i, e in enumerate(exprs):
-                self._check_symbols(e, self._allowed_symbols(), f"{field_name[:-1]} {i}")
+                self._check_symbols(e, self._allowed_symbols(), f"{field_name[:-1]} {i}",
+                                    smooth=field_name == "constraints")
             object.__setattr__(self, field_name, exprs)
         if self.constraints and self.order != 2:
             raise ModelError(f"model {self.name!r}: constraints need a second-order model "

@@ -39,7 +39,8 @@ def generic_rank(matrix: sp.Matrix, symbols: Sequence[sp.Symbol],
 
     ``fixed`` gives values for the remaining symbols (parameters, the step);
     ``definitions`` intermediate quantities ``matrix`` may use (see
-    :func:`sequential_lambdify`). Returns None when no sample point gave finite entries.
+    :func:`sequential_lambdify`). Returns None when no sample point gave finite entries
+    or the matrix holds a function NumPy cannot evaluate.
     """
     fixed = dict(fixed or {})
     args = list(symbols) + list(fixed)
@@ -48,8 +49,11 @@ def generic_rank(matrix: sp.Matrix, symbols: Sequence[sp.Symbol],
     best = None
     for _ in range(samples):
         values = list(rng.uniform(-0.7, 0.7, len(symbols))) + list(fixed.values())
-        with np.errstate(all="ignore"):
-            M = np.array(f(*values), dtype=float)
+        try:
+            with np.errstate(all="ignore"):
+                M = np.array(f(*values), dtype=float)
+        except (NameError, TypeError):
+            return None     # a function NumPy lacks: the rank is not known
         if not np.all(np.isfinite(M)):
             continue
         rank = int(np.linalg.matrix_rank(M, tol=1e-10 * max(1.0, float(np.abs(M).max()))))

@@ -281,7 +281,7 @@ def test_compiler_error_is_reported_with_compiler_output(tmp_path, monkeypatch):
     assert not isinstance(info.value, CompilerNotFoundError)
     # nothing half-built is left behind: no package, no scratch directory
     assert not (tmp_path / "harmonic_oscillator").exists()
-    assert not list(tmp_path.glob(".harmonic_oscillator-build-*"))
+    assert not list(tmp_path.glob(".harmonic_oscillator/build-*"))
     # and the real flags still build the model in the same directory afterwards
     monkeypatch.undo()
     mod = compile_model(get("harmonic_oscillator"), tmp_path)

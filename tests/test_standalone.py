@@ -6,7 +6,9 @@
 * An unchanged model reuses its build (same extension file, fast); a changed parameter
   default or Lagrangian rebuilds.
 * Two concurrent compiles into one directory both succeed and leave one working package;
-  debris of an interrupted build does not break the next compile or import.
+  debris of an interrupted build does not break the next compile or import, and goes.
+* ``DIR/NAME`` links to a version folder in ``DIR/.NAME/``; a copy of the package
+  elsewhere still works.
 """
 from __future__ import annotations
 
@@ -26,6 +28,7 @@ import sympy as sp
 import symvi
 from symvi import Model, PairGroupoid
 from symvi.build import MANIFEST, compile_model
+from symvi.errors import CacheWarning
 from symvi.models import BUNDLED, get
 
 #: Directory that makes ``import symvi`` work in a child process (checkout or install).
@@ -211,8 +214,11 @@ def test_changed_default_or_lagrangian_rebuilds(tmp_path):
     assert quartic.INFO["key"] not in (key0, stiffer.INFO["key"]) and ext2 not in (ext0, ext1)
     r2 = quartic.integrate([[1.0], [np.cos(2 * h)]], N - 1, h)
     assert abs(r2.q[-1, 0] - 1.0) > 1e-2                      # different dynamics
-    # only the current build is left in the package directory
+    # only the current build is left in the package directory, and beside it only the
+    # version it replaced
     assert sorted(p.name for p in (tmp_path / "cache_probe").glob("_ext_*")) == [ext2.name]
+    kept = sorted(p.name for p in (tmp_path / ".cache_probe").iterdir() if p.name != "lock")
+    assert len(kept) == 2 and (tmp_path / "cache_probe").resolve().name in kept, kept
 
 
 # -- concurrency and interrupted builds ------------------------------------------------------
@@ -225,9 +231,10 @@ def test_concurrent_compiles_into_same_directory(tmp_path):
     results = [p.communicate(timeout=300) for p in procs]
     for p, (out, err) in zip(procs, results):
         assert p.returncode == 0, err
-    # one package, no scratch or old directories left behind
-    entries = sorted(p.name for p in tmp_path.iterdir())
-    assert [e for e in entries if not e.endswith(".lock")] == [name], entries
+    # one package (a link to the one version folder), no scratch folder left behind
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f".{name}", name]
+    store = sorted(p.name for p in (tmp_path / f".{name}").iterdir())
+    assert store == sorted(["lock", (tmp_path / name).resolve().name]), store
     assert len(list((tmp_path / name).glob("_ext_*"))) == 1
     example = get(name).example
     out = run_standalone(tmp_path, name, example)
@@ -237,20 +244,27 @@ def test_concurrent_compiles_into_same_directory(tmp_path):
 def test_interrupted_build_debris_does_not_break_compile_or_import(tmp_path):
     name = "pendulum"
     example = get(name).example
-    # a half-written scratch directory of an earlier, killed build ...
-    junk = tmp_path / f".{name}-build-deadbeef" / name
-    junk.mkdir(parents=True)
-    (junk / "__init__.py").write_text("raise RuntimeError('half-written package imported')\n")
-    (junk / "_ext_0000000000000000.c").write_text("this is not C")
-    (tmp_path / f".{name}-build-deadbeef" / f"{name}-work").mkdir()
-    # ... and a package directory without its manifest or extension (killed mid-copy)
+    # half-written scratch folders of earlier, killed builds (this symvi's and an older
+    # one's), a temporary link of a build killed while swapping ...
+    for junk in (tmp_path / f".{name}" / "build-deadbeef" / "package",
+                 tmp_path / f".{name}-build-deadbeef" / name):
+        junk.mkdir(parents=True)
+        (junk / "__init__.py").write_text("raise RuntimeError('half-written package imported')\n")
+        (junk / "_ext_0000000000000000.c").write_text("this is not C")
+    (tmp_path / f".{name}" / "link-deadbeef").symlink_to("nowhere")
+    # ... and a package folder without its manifest or extension (older symvi, killed
+    # mid-copy)
     partial = tmp_path / name
     (partial / "_runtime").mkdir(parents=True)
     (partial / "__init__.py").write_text("raise RuntimeError('partial package imported')\n")
 
-    mod = compile_model(get(name), tmp_path)
+    with pytest.warns(CacheWarning, match="pendulum: cached build is damaged"):
+        mod = compile_model(get(name), tmp_path)
     assert mod.integrate(example.initial, 100, example.h).success
-    assert extension_of(partial).is_file()
+    assert partial.is_symlink() and extension_of(partial).is_file()
+    assert sorted(p.name for p in tmp_path.iterdir()) == [f".{name}", name]
+    store = sorted(p.name for p in (tmp_path / f".{name}").iterdir())
+    assert not [e for e in store if e.startswith(("build-", "link-"))], store
     out = run_standalone(tmp_path, name, example)
     assert out["success"], out["message"]
 
@@ -266,7 +280,8 @@ def test_package_with_missing_extension_is_rebuilt(tmp_path):
     compile_model(get(name), tmp_path)
     ext = extension_of(tmp_path / name)
     ext.unlink()                                     # manifest now points at nothing
-    compile_model(get(name), tmp_path)
+    with pytest.warns(CacheWarning, match=rf"cached build is damaged \({ext.name}: missing"):
+        compile_model(get(name), tmp_path)
     assert extension_of(tmp_path / name).is_file()
     example = get(name).example
     out = run_standalone(tmp_path, name, example)

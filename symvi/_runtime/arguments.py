@@ -1,4 +1,9 @@
-"""Validation of user arguments: shapes, finiteness, step size, parameters."""
+"""Validation of user arguments: types, shapes, finiteness, step size, counts, parameters.
+
+Numbers must be numbers: strings, booleans, complex values and objects that merely convert
+to a float (``'2.0'``, ``True``) are refused rather than silently converted, since such a
+value in a numerical argument is almost always a mistake upstream.
+"""
 from __future__ import annotations
 
 import math
@@ -7,13 +12,43 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+#: Largest value of a C ``int`` argument (maxiter): larger ones would overflow in cffi.
+INT_MAX = 2**31 - 1
+#: Largest value of a C ``long`` argument (step and node counts).
+LONG_MAX = 2**63 - 1
+
+
+def _is_real(value) -> bool:
+    return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
+
+
+def real_array(value, what: str) -> np.ndarray:
+    """``value`` as a float64 array, refusing strings, booleans, complex and other
+    non-numbers (NumPy would convert ``'2.0'`` and ``True`` without a word)."""
+    arr = value
+    if not isinstance(value, np.ndarray):
+        # element by element: NumPy would turn [True, 1.5] into [1.0, 1.5]
+        try:
+            arr = np.asarray(value, dtype=object)
+        except (TypeError, ValueError) as exc:   # ragged nesting
+            raise ValueError(f"{what} must be an array of numbers: {exc}") from None
+    if arr.dtype.kind == "O":
+        flat = arr.reshape(-1)
+        bad = [v for v in flat if not _is_real(v)][:1]
+        if bad:
+            raise ValueError(f"{what} must be an array of real numbers, got an element "
+                             f"{bad[0]!r} of type {type(bad[0]).__name__}")
+        return np.array([float(v) for v in flat], dtype=np.float64).reshape(arr.shape)
+    if arr.dtype.kind not in "iuf":
+        kind = {"b": "booleans", "c": "complex numbers", "U": "strings", "S": "bytes"}
+        raise ValueError(f"{what} must be an array of real numbers, got "
+                         f"{kind.get(arr.dtype.kind, f'dtype {arr.dtype}')}")
+    return np.ascontiguousarray(arr, dtype=np.float64)
+
 
 def finite_array(value, shape: tuple[int, ...], what: str) -> np.ndarray:
     """``value`` as a C-contiguous float64 array of ``shape`` with finite entries."""
-    try:
-        arr = np.array(value, dtype=np.float64, order="C")
-    except (TypeError, ValueError) as exc:
-        raise ValueError(f"{what} must be an array of numbers: {exc}") from None
+    arr = real_array(value, what)
     squeezed = tuple(shape)
     while squeezed and squeezed[-1] == 1:
         squeezed = squeezed[:-1]
@@ -26,11 +61,20 @@ def finite_array(value, shape: tuple[int, ...], what: str) -> np.ndarray:
     if bad.any():
         index = tuple(int(i) for i in np.argwhere(bad)[0])
         raise ValueError(f"{what} contains a non-finite value ({arr[index]}) at index {index}")
-    return arr
+    return np.array(arr, order="C", copy=True)
+
+
+def real(value, what: str) -> float:
+    """A real scalar (not a string, a boolean or a complex number)."""
+    if isinstance(value, np.ndarray) and value.ndim == 0:
+        value = value[()]
+    if not _is_real(value):
+        raise ValueError(f"{what} must be a real number, got {value!r}")
+    return float(value)
 
 
 def step_size(h) -> float:
-    if isinstance(h, bool) or not isinstance(h, numbers.Real):
+    if not _is_real(h):
         raise ValueError(f"the time step h must be a real number, got {h!r}")
     h = float(h)
     if not math.isfinite(h) or h <= 0.0:
@@ -38,16 +82,24 @@ def step_size(h) -> float:
     return h
 
 
-def count(value, what: str, minimum: int = 0) -> int:
-    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+def count(value, what: str, minimum: int = 0, maximum: int = LONG_MAX) -> int:
+    """An integer in [minimum, maximum] (maximum: what the C argument can hold)."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
         raise ValueError(f"{what} must be an integer, got {value!r}")
     if value < minimum:
         raise ValueError(f"{what} must be at least {minimum}, got {value}")
+    if value > maximum:
+        raise ValueError(f"{what} must be at most {maximum}, got {value}")
     return int(value)
 
 
+def iterations(value, what: str = "maxiter") -> int:
+    """An iteration limit passed to C as an ``int``."""
+    return count(value, what, 1, INT_MAX)
+
+
 def tolerance(value, what: str) -> float:
-    value = float(value)
+    value = real(value, what)
     if not math.isfinite(value) or value < 0:
         raise ValueError(f"{what} must be finite and non-negative, got {value}")
     return value
@@ -62,16 +114,23 @@ def parameters(names: Sequence[str], defaults: Sequence[float],
     elif isinstance(given, Mapping):
         unknown = set(given) - set(names)
         if unknown:
-            raise ValueError(f"unknown parameter(s) {sorted(unknown)}; the model has "
-                             f"{list(names)}")
+            raise ValueError(f"unknown parameter(s) {sorted(map(str, unknown))}; the model "
+                             f"has {list(names)}")
         values.update(given)
+    elif isinstance(given, (str, bytes)):
+        raise ValueError(f"params must be a mapping name → value or a sequence of "
+                         f"{len(names)} numbers, got {given!r}")
     else:
-        seq = list(given)
+        try:
+            seq = list(given)
+        except TypeError:
+            raise ValueError(f"params must be a mapping name → value or a sequence of "
+                             f"{len(names)} numbers, got {given!r}") from None
         if len(seq) != len(names):
             raise ValueError(f"expected {len(names)} parameter values {list(names)}, "
                              f"got {len(seq)}")
         values = dict(zip(names, seq))
-    vec = np.array([values[n] for n in names] or [0.0], dtype=np.float64)
+    vec = np.array([real(values[n], f"parameter {n}") for n in names] or [0.0])
     for name, v in zip(names, vec):
         if not math.isfinite(v):
             raise ValueError(f"parameter {name} must be finite, got {v}")

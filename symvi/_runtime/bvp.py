@@ -9,12 +9,15 @@ multipliers λ^k of every window (paper §3.2, eq. ``constrainedso``).
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from . import arguments
 from .gauge import Gauge, check_boundary
 from .paths import Path, initial_path
 from .results import BVPResult, Status
+from .storage import check_path_memory as check_memory
 
 
 class _Problem:
@@ -190,7 +193,8 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
     N = arguments.count(n_steps, "n_steps", 2 * r)
     h, p = arguments.step_size(h), model.params(params)
     xtol, ftol = arguments.tolerance(xtol, "xtol"), arguments.tolerance(ftol, "ftol")
-    maxiter = arguments.count(maxiter, "maxiter", 1)
+    maxiter = arguments.iterations(maxiter)
+    check_memory(model, N)
     path = initial_path(model, start, end, N, guess, p, h)
     if isinstance(path, BVPResult):
         return path.raise_for_status() if raise_on_failure else path
@@ -206,7 +210,24 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
     result = _result(model, path, p, h, dict(
         t=h * np.arange(N + 1), iterations=len(steps), residual_norms=np.array(norms),
         step_norms=np.array(steps), status=status, message=message))
+    result = _finite(result)
     return result.raise_for_status() if raise_on_failure else result
+
+
+def _finite(result: BVPResult) -> BVPResult:
+    """A converged solve whose outputs are not all finite is NON_FINITE, not a success."""
+    if not result.success:
+        return result
+    outputs = {"x": "nodes are", "g": "configurations are", "f": "fibres are",
+               "multipliers": "multipliers are", "controls": "controls are", "cost": "cost is"}
+    for name, what in outputs.items():
+        values = getattr(result, name)
+        parts = values if isinstance(values, tuple) else (values,)
+        if values is not None and not all(np.isfinite(v).all() for v in parts):
+            return replace(result, status=Status.NON_FINITE, message=(
+                f"{result.message}, but its {what} not finite (magnitudes overflow double "
+                f"precision)"))
+    return result
 
 
 def _conditioning(problem: _Problem, path: Path, status: Status) -> str:
@@ -250,13 +271,14 @@ def _newton(problem, state, maxiter: int, xtol: float, ftol: float):
         if not finite:
             status, message = Status.NON_FINITE, f"non-finite residual or Jacobian at iteration {it}"
             break
-        if norms[-1] <= ftol:
-            status = Status.SUCCESS
-            break
         try:
             delta = problem.solve(ab, bw, -res)
         except (LinAlgError, ValueError):
+            # even at R = 0: the solution is then not isolated (e.g. L_d ≡ 0)
             status, message = Status.SINGULAR_JACOBIAN, f"singular Jacobian at iteration {it}"
+            break
+        if norms[-1] <= ftol:
+            status = Status.SUCCESS
             break
         size = float(np.abs(delta).max(initial=0.0))
         level = _rounding_level(ab[bw:], bw, problem.magnitudes(state))

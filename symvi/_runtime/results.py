@@ -2,9 +2,7 @@
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass, field
-from functools import cached_property
-from typing import Callable
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -45,40 +43,31 @@ class StepResult(_Checkable):
     momenta : discrete Legendre transforms at each state: (E+1, n) for first order
         (p_0 from F⁻L_d, p_k for k ≥ 1 from F⁺L_d), (E, 2, n) for second order (state k
         is the node pair (ν_k, ν_{k+1}); states 0, 1 from F⁻L_d, the rest from F⁺L_d).
-        Evaluated in C on first access.
     energy : (E,) discrete energy −∂L_d/∂h per element (first-order models), else None.
-        Evaluated in C on first access.
     noether : (E−2r+2, s) conserved quantities F_Z of the model's declared symmetries at
         nodes r−1, r, … (paper §4.4), one column per symmetry, else None.
     newton_iterations : (steps,) Newton iterations of each computed step.
     status, success, message : outcome; on failure the arrays hold the path up to the
-        failing step.
+        failing step. Success means every step converged and every array is finite.
+
+    With ``keep_every=k`` each array holds only the entries of the nodes 0, k, 2k, …
+    (see :func:`stepping.integrate`).
     """
 
     t: np.ndarray
     x: np.ndarray
     f: np.ndarray
-    g: np.ndarray | None
+    g: np.ndarray | tuple | None
     newton_iterations: np.ndarray
     status: Status
     message: str
-    along: Callable[[str], np.ndarray | None] = field(repr=False, compare=False)
+    momenta: np.ndarray | None = None
+    energy: np.ndarray | None = None
+    noether: np.ndarray | None = None
 
     @property
     def success(self) -> bool:
         return self.status == Status.SUCCESS
-
-    @cached_property
-    def momenta(self) -> np.ndarray:
-        return self.along("momenta")
-
-    @cached_property
-    def energy(self) -> np.ndarray | None:
-        return self.along("energy")
-
-    @cached_property
-    def noether(self) -> np.ndarray | None:
-        return self.along("noether")
 
     @property
     def q(self) -> np.ndarray:

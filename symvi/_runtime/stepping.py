@@ -1,22 +1,37 @@
-"""The step map: one call into the C loop integrates every step (Newton per step in C)."""
+"""The step map: the C loop integrates the steps (Newton per step in C), chunk by chunk.
+
+The loop returns to Python every ~0.05 s, so that Ctrl-C (raised by Python between two C
+calls) stops a long run promptly, and so that a run can keep only every k-th node (see
+:mod:`.storage`). Each chunk continues from the stencil the C loop would have slid to, so
+a chunked run is bitwise the run of one call.
+"""
 from __future__ import annotations
+
+import time
+from dataclasses import dataclass
 
 import numpy as np
 
 from . import arguments
 from .results import Status, StepResult
+from .storage import Series, check_memory
 
 _FAILURE = {
     Status.MAX_ITERATIONS: "Newton's method did not converge in {maxiter} iterations",
-    Status.SINGULAR_JACOBIAN: "the step Jacobian is singular",
+    Status.SINGULAR_JACOBIAN: ("the step Jacobian is singular (the step map is not defined "
+                               "at these data: D₁₂L_d, resp. D₁₃L_d, is singular)"),
     Status.NON_FINITE: "the residual or the update became non-finite (NaN or inf)",
     Status.OUTSIDE_CHART: ("the increment hξ left the retraction's chart (Cayley: I − hξ/2 "
                            "singular; exp: θ(hξ) ≥ π)"),
 }
+#: Seconds of C between two returns to Python (the latency of Ctrl-C).
+CHUNK_SECONDS = 0.05
+#: Steps of the chunk buffer when only every k-th node is kept.
+BUFFER_STEPS = 2**16
 
 
 def integrate(model, initial, n_steps: int, h: float, params=None, *, maxiter: int = 50,
-              xtol: float = 1e-12, ftol: float = 0.0,
+              xtol: float = 1e-12, ftol: float = 0.0, keep_every: int = 1,
               raise_on_failure: bool = False) -> StepResult:
     """Integrate ``n_steps`` steps of the discrete Euler–Lagrange equations.
 
@@ -31,45 +46,180 @@ def integrate(model, initial, n_steps: int, h: float, params=None, *, maxiter: i
     n_steps : number of new elements to compute.
     h : time step (> 0). params : parameter overrides (mapping name → value).
     maxiter, xtol, ftol : Newton stops when ‖Δf‖∞ ≤ xtol·(1 + ‖f‖∞) or ‖R‖∞ ≤ ftol.
+    keep_every : store only the nodes 0, k, 2k, … and what belongs to them (the elements
+        leaving them, their momenta, energies and conserved quantities, the iterations of
+        the steps that computed them; ``t`` gives their times), so that a long run fits
+        in memory. A run whose stored path would not fit is refused before anything is
+        allocated, with a ``MemoryError`` giving the estimate.
     raise_on_failure : raise :class:`NewtonError` instead of returning a failed result.
+
+    A step whose Jacobian is singular (the step map is not defined there) fails with
+    ``SINGULAR_JACOBIAN`` even where the residual vanishes, and a run whose path, momenta,
+    energies or conserved quantities are not all finite is never a success
+    (``NON_FINITE``). Ctrl-C stops a run within a fraction of a second
+    (``KeyboardInterrupt``).
     """
     n_steps = arguments.count(n_steps, "n_steps")
+    keep = arguments.count(keep_every, "keep_every", 1)
     h = arguments.step_size(h)
-    maxiter = arguments.count(maxiter, "maxiter", 1)
+    maxiter = arguments.iterations(maxiter)
     xtol, ftol = arguments.tolerance(xtol, "xtol"), arguments.tolerance(ftol, "ftol")
     (z0, g0), p = model.initial_state(initial), model.params(params)
-    K, m, n = model.stencil_elements, model.m, model.n
-    elements = K - 1 + n_steps
-    x = np.zeros((elements + 1, m))
-    f = np.zeros((elements, n))
-    G = model.info["configuration_dim"]
-    g = np.zeros((elements + 1, G) if G else 1)
-    iters = np.zeros(max(n_steps, 1), dtype=np.intc)
-    done, rnorm = model.ffi.new("long *"), model.ffi.new("double *")
-    code = model.lib.symvi_integrate(model.ptr(z0), model.ptr(g0), n_steps, model.ptr(p), h,
-                                     maxiter, xtol, ftol, model.ptr(x), model.ptr(f),
-                                     model.ptr(g), model.ffi.from_buffer("int[]", iters),
-                                     done, rnorm)
-    status, steps = Status(code), int(done[0])
+    K = model.stencil_elements
+    check_memory(model, K - 1 + n_steps, keep, BUFFER_STEPS if keep > 1 else 0)
+    run = _Run(model, n_steps, keep, p, h)
+    code, steps, rnorm = run.loop(z0, g0, maxiter, xtol, ftol)
+    status = Status(code)
     if status == Status.SUCCESS:
         message = f"integrated {n_steps} steps"
     else:
         reason = _FAILURE[status].format(maxiter=maxiter)
         message = (f"step {steps} (to t = {(K + steps) * h:.6g}) failed: {reason}; "
-                   f"residual norm {rnorm[0]:.3e}")
-        x, f, g = x[: K + steps], f[: K - 1 + steps], g[: K + steps]
-
-    def along(quantity: str):
-        if quantity == "momenta":
-            return model.momenta(x, f, h, params)
-        if quantity == "noether":
-            return model.noether(x, f, h, params)
-        if model.info["has_energy"]:
-            return model.along("energy", x, f, h, params)[:, 0]
-        return None
-
-    result = StepResult(t=h * np.arange(x.shape[0]), x=x, f=f,
-                        g=model.configurations(g.reshape(x.shape[0], -1)) if G else None,
-                        newton_iterations=iters[:steps].copy(), status=status, message=message,
-                        along=along)
+                   f"residual norm {rnorm:.3e}")
+    result = run.result(steps, status, message)
     return result.raise_for_status() if raise_on_failure else result
+
+
+@dataclass(frozen=True)
+class _Quantity:
+    """A result field computed by a kernel on windows of ``width`` consecutive elements;
+    window i is entry i + ``shift`` of the field (``first``: windows 0 … first − 1 only,
+    in the first chunk)."""
+
+    field: str
+    kernel: str
+    width: int
+    shift: int = 0
+    first: int = 0
+
+
+def _layout(model) -> tuple[list[_Quantity], dict[str, tuple[int, int, tuple]]]:
+    """The derived quantities, and every stored field as (lag, offset, shape): a path of E
+    elements has E + lag entries of the field, entry i belonging to node i + offset.
+
+    Momenta: states 0 … r−1 from F⁻L_d, state i + r from F⁺L_d on window i, state j at
+    node j; the energy of each element; the conserved quantities of window i at node
+    i + r − 1 (paper §4.4); the Newton iterations of step s at node K + s.
+    """
+    r, n, K = model.order, model.n, model.stencil_elements
+
+    def width(kernel):
+        return (model.info["kernels"][kernel]["nz"] - model.m) // n
+
+    w, G = width("momentum_plus"), model.info["configuration_dim"]
+    quantities = [_Quantity("momenta", "momentum_minus", w, 0, r),
+                  _Quantity("momenta", "momentum_plus", w, r)]
+    fields = {"x": (1, 0, (model.m,)), "f": (0, 0, (n,)), "newton_iterations": (1 - K, K, ()),
+              "momenta": (r - w + 1, 0, (n,) if r == 1 else (r, n))}
+    if G:
+        fields["g"] = (1, 0, (G,))
+    if model.info["has_energy"]:
+        quantities.append(_Quantity("energy", "energy", width("energy")))
+        fields["energy"] = (1 - width("energy"), 0, ())
+    if model.info.get("symmetries"):
+        quantities.append(_Quantity("noether", "noether", width("noether")))
+        fields["noether"] = (1 - width("noether"), r - 1, (len(model.info["symmetries"]),))
+    return quantities, fields
+
+
+class _Run:
+    """The stored series of one run and the chunk loop that fills them."""
+
+    def __init__(self, model, n_steps: int, keep: int, p: np.ndarray, h: float):
+        self.model, self.n_steps, self.keep, self.p, self.h = model, n_steps, keep, p, h
+        m, n, K = model.m, model.n, model.stencil_elements
+        E, G = K - 1 + n_steps, model.info["configuration_dim"]
+        self.G = G
+        self.quantities, self.fields = _layout(model)
+        self.series = {name: Series.empty(E + lag, offset, keep, shape,
+                                          np.intc if name == "newton_iterations" else float)
+                       for name, (lag, offset, shape) in self.fields.items()}
+        if keep == 1:    # the C loop writes straight into the result
+            self.x, self.f = self.series["x"].values, self.series["f"].values
+            self.g = self.series["g"].values if G else np.zeros((1, 1))
+            self.iters = self.series["newton_iterations"].values
+        else:
+            steps = min(BUFFER_STEPS, n_steps)
+            self.x, self.f = np.zeros((K + steps, m)), np.zeros((K - 1 + steps, n))
+            self.g = np.zeros((K + steps if G else 1, max(G, 1)))
+            self.iters = np.zeros(steps, np.intc)
+
+    def loop(self, z0, g0, maxiter: int, xtol: float, ftol: float) -> tuple[int, int, float]:
+        """Run the chunks; returns (status code, steps done, last residual norm)."""
+        model, K = self.model, self.model.stencil_elements
+        done, rnorm = model.ffi.new("long *"), model.ffi.new("double *")
+        start, chunk = 0, 4096
+        while True:
+            size = min(chunk, self.n_steps - start, BUFFER_STEPS if self.keep > 1 else chunk)
+            at = start if self.keep == 1 else 0
+            x, f, g = self.x[at:], self.f[at:], self.g[at:] if self.G else self.g
+            began = time.perf_counter()
+            code = model.lib.symvi_integrate(
+                model.ptr(z0), model.ptr(g0), size, model.ptr(self.p), self.h, maxiter, xtol,
+                ftol, model.ptr(x), model.ptr(f), model.ptr(g),
+                model.ffi.from_buffer("int[]", self.iters[at:]), done, rnorm)
+            elapsed = time.perf_counter() - began
+            finished = code != 0 or start + size == self.n_steps
+            self._store(start, int(done[0]), finished)
+            if finished:
+                return code, start + int(done[0]), float(rnorm[0])
+            # the next chunk starts from the stencil this one slid to
+            z0 = np.concatenate([x[size], f[size: size + K - 1].reshape(-1)])
+            g0 = g[size].copy() if self.G else g0
+            if self.keep > 1:
+                self.x[0], self.f[: K - 1] = x[size], f[size: size + K - 1]
+                self.g[0] = g[size] if self.G else 0.0
+            start += size
+            chunk = int(min(max(size * CHUNK_SECONDS / max(elapsed, 1e-6), 1024), 2**30))
+
+    def _store(self, start: int, done: int, finished: bool) -> None:
+        """Store what the chunk that began at step ``start`` computed: its ``done`` new
+        elements, and the windows that begin in it (all that remain, if ``finished``)."""
+        elements = self.model.stencil_elements - 1 + done    # valid in this chunk's buffer
+        at = start if self.keep == 1 else 0
+        if self.keep > 1:
+            path = {"x": (self.x, elements + 1), "f": (self.f, elements),
+                    "g": (self.g, elements + 1), "newton_iterations": (self.iters, done)}
+            for name, (values, valid) in path.items():
+                if name in self.series:
+                    self.series[name].put(start, values[: valid if finished else done])
+        for q in self.quantities:
+            if q.first:
+                windows = q.first if start == 0 else 0
+            else:
+                windows = elements - q.width + 1 if finished else done
+            if windows > 0:
+                series = self.series[q.field]
+                values = self.model.along_vector(q.kernel, self.x[at:], self.f[at:], self.h,
+                                                 self.p, windows)
+                series.put(start + q.shift, values.reshape(windows, *series.values.shape[1:]))
+
+    def result(self, steps: int, status: Status, message: str) -> StepResult:
+        """The StepResult of a run that completed ``steps`` steps."""
+        elements = self.model.stencil_elements - 1 + steps
+        out = {"g": None, "energy": None, "noether": None}
+        out |= {name: self.series[name].until(elements + lag)
+                for name, (lag, _, _) in self.fields.items()}
+        if status == Status.SUCCESS:
+            status, message = _finite(out, message, self.h * self.keep)
+        if self.G:
+            out["g"] = self.model.configurations(out["g"])
+        out["t"] = self.h * (self.keep * np.arange(out["x"].shape[0]))
+        return StepResult(status=status, message=message, **out)
+
+
+def _finite(out: dict, message: str, spacing: float) -> tuple[Status, str]:
+    """NON_FINITE, naming the first quantity and time, when an output is not finite."""
+    for name in ("x", "f", "g", "momenta", "energy", "noether"):
+        values = out.get(name)
+        if values is None or np.isfinite(values).all():
+            continue
+        row = int(np.argwhere(~np.isfinite(values.reshape(values.shape[0], -1)))[0, 0])
+        label = {"x": "nodes (base points)", "f": "fibres", "g": "configurations",
+                 "energy": "energies", "noether": "conserved quantities"}.get(name, name)
+        scale = float(np.abs(out["x"]).max(initial=0.0))
+        return Status.NON_FINITE, (
+            f"{message}, but the {label} are not finite (first at entry {row}, t ≈ "
+            f"{row * spacing:.6g}): the path's magnitudes (max |x| = {scale:.3g}) overflow "
+            f"double precision")
+    return Status.SUCCESS, message

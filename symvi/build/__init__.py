@@ -1,0 +1,210 @@
+"""Build stage: C source → cffi extension → importable package ``DIR/<name>``.
+
+The only stage that touches the filesystem. ``DIR/<name>`` is a relative symlink to a
+version folder ``DIR/.<name>/<version>/``, replaced atomically by each build (layout,
+swap and clean-up: :mod:`symvi.build.swap`). A build is cached under a content hash of the
+model (its description included), the templates, the compile flags, symvi's sources
+and version, and reused only after every file of the package has been checked against
+the hashes of its manifest (:mod:`symvi.build.cache`); a damaged build is rebuilt with a
+:class:`~symvi.errors.CacheWarning`. Builds of one package are serialised by a lock;
+the C compile runs in a child process (:mod:`symvi.build.ccompile`), so that builds from
+several threads of one process do not disturb each other, and gives a bitwise
+reproducible extension. An interrupted or failed build leaves the previous package (or
+none) in place and debris that the next build removes.
+"""
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import importlib.util
+import os
+import shlex
+import shutil
+import sys
+import sysconfig
+import threading
+import warnings
+from pathlib import Path
+from types import ModuleType
+
+from .. import __version__
+from .cache import MANIFEST, inspect, problems, read_manifest, summary
+from .ccompile import CompileTimeout, compile_extension
+from ..derive import derive
+from ..discretise import discretise
+from ..emit import CSource, emit, templates_digest
+from ..errors import BuildError, CacheWarning, CompilerNotFoundError, DamagedPackageError
+from .files import writing
+from ..model import Model
+from .package import PACKAGE, write_package
+from .stages import Expired, Progress, StageClock
+from .swap import Layout, ensure_folder
+
+__all__ = ["MANIFEST", "COMPILE_ARGS", "cache_key", "compile_model", "find_compiler", "load"]
+
+#: Flags of the C compile (part of the cache key). ``-g0`` keeps the extension free of
+#: debug information, which would record the (randomly named) build folder: the same
+#: model then compiles to a bitwise-identical extension.
+COMPILE_ARGS = ["-O3", "-std=c99", "-fno-math-errno", "-g0"]
+
+_LOAD_LOCK = threading.RLock()
+
+
+def cache_key(model: Model) -> str:
+    """Content hash of everything that determines the generated package.
+
+    The model (its fingerprint and its description, which the package's docstring and
+    ``INFO`` carry), the templates, the compile flags, the symvi version and symvi's own
+    sources (the derivation code and the run-time files copied into the package).
+    """
+    h = hashlib.sha256()
+    for part in (__version__, templates_digest(), model.fingerprint(),
+                 str(model.description or ""), " ".join(COMPILE_ARGS)):
+        h.update(part.encode("utf-8", "surrogatepass") + b"\0")
+    for path in sorted(PACKAGE.rglob("*.py")):
+        h.update(str(path.relative_to(PACKAGE)).encode() + path.read_bytes())
+    return h.hexdigest()
+
+
+def find_compiler() -> str:
+    """The C compiler cffi will run; raise :class:`CompilerNotFoundError` if it is missing."""
+    command = os.environ.get("CC") or sysconfig.get_config_var("CC") or "cc"
+    executable = shlex.split(command)[0]
+    if shutil.which(executable) is None:
+        raise CompilerNotFoundError(
+            f"no C compiler found: cffi would run {executable!r} (from $CC or Python's build "
+            f"configuration) and it is not on PATH. Install a C compiler (e.g. "
+            f"`apt-get install gcc`) or point $CC at one.")
+    return executable
+
+
+# -- importing -----------------------------------------------------------------------------
+def load(package_dir: str | os.PathLike) -> ModuleType:
+    """Import a generated package from its directory (without editing ``sys.path``).
+
+    ``package_dir`` is ``DIR/<name>`` (followed to its version folder) or a copy of a
+    package. Its files are first checked against its manifest: a damaged package
+    raises :class:`~symvi.errors.DamagedPackageError` (an ``ImportError``) saying what
+    is wrong and how to recompile. Safe to call from several threads.
+    """
+    folder = Path(package_dir).resolve()
+    manifest = read_manifest(folder)
+    found = [f"{MANIFEST}: missing or unreadable"] if manifest is None \
+        else problems(folder, manifest)
+    if found:
+        out = Path(package_dir).absolute().parent
+        raise DamagedPackageError(
+            f"generated package {folder} is damaged ({summary(found)}); recompile it: "
+            f"symvi compile <model> -o {out} --force, or "
+            f"symvi.compile_model(model, {str(out)!r}, force=True)")
+    return _import(folder, manifest)
+
+
+def _import(folder: Path, manifest: dict) -> ModuleType:
+    """Import the verified package ``folder`` under an alias unique to its folder and
+    build, so that packages of one name from several folders can be loaded side by side."""
+    where = hashlib.sha256(str(folder).encode("utf-8", "surrogatepass")).hexdigest()[:8]
+    alias = f"_symvi_{manifest.get('name', folder.name)}_{str(manifest.get('key'))[:16]}_{where}"
+    # One lock for all loads: a second thread must not find the first one's module in
+    # sys.modules before it has finished executing.
+    with _LOAD_LOCK:
+        if alias in sys.modules:
+            return sys.modules[alias]
+        spec = importlib.util.spec_from_file_location(
+            alias, folder / "__init__.py", submodule_search_locations=[str(folder)])
+        module = importlib.util.module_from_spec(spec)
+        sys.modules[alias] = module
+        try:
+            spec.loader.exec_module(module)
+        except BaseException:
+            del sys.modules[alias]
+            raise
+        return module
+
+
+# -- compiling -----------------------------------------------------------------------------
+def compile_model(model: Model, out_dir: str | os.PathLike = "generated", *,
+                  force: bool = False, verbose: bool = False, timeout: float | None = None,
+                  progress: Progress | None = None) -> ModuleType:
+    """Derive, emit and build ``model`` into ``out_dir/<name>`` and import it.
+
+    An unchanged model reuses its build unless ``force``, after checking every file of
+    it; a damaged build is rebuilt, with a :class:`~symvi.errors.CacheWarning` saying
+    what was wrong. A current build is loaded without writing anything (it may sit in
+    a read-only folder).
+
+    ``timeout`` (seconds) bounds the whole build; at the deadline it stops with a
+    :class:`~symvi.errors.BuildError` naming the stage that was running (discretise,
+    derive, emit, C compile) and the time of each finished stage. The symbolic stages
+    can only be interrupted when called from the main thread (``SIGALRM``); from other
+    threads the deadline bounds the C compile and is checked between stages.
+    ``progress`` receives a line for each stage that runs longer than 2 s (``verbose``:
+    for every stage); ``verbose`` also shows the compiler's output on stderr.
+
+    Raises :class:`~symvi.errors.ModelError` for an invalid (e.g. non-regular) model,
+    :class:`~symvi.errors.BuildError` if C compilation fails (with the compiler's
+    output), the output folder cannot be written or the timeout passes, and
+    :class:`~symvi.errors.CompilerNotFoundError` if there is no C compiler.
+    """
+    clock = StageClock(model.name, timeout, progress, verbose)
+    out = Path(out_dir)
+    ensure_folder(out)
+    key, layout = cache_key(model), Layout(out, model.name)
+    if not force:
+        verdict = inspect(layout.target, key)
+        if verdict.current:
+            _tidy(layout)
+            return _import(verdict.folder, read_manifest(verdict.folder))
+    with layout.locked():
+        if not force:
+            verdict = inspect(layout.target, key)
+            if verdict.current:      # built meanwhile by another process
+                return _import(verdict.folder, read_manifest(verdict.folder))
+            if verdict.damage:
+                warnings.warn(f"{model.name}: cached build is damaged "
+                              f"({summary(verdict.damage)}); rebuilding",
+                              CacheWarning, stacklevel=2)
+        folder = _build(model, key, layout, clock, verbose)
+        return _import(folder, read_manifest(folder))
+
+
+def _tidy(layout: Layout) -> None:
+    """Remove what killed builds left, if the folder is writable and no build runs."""
+    if not layout.has_debris():
+        return
+    with contextlib.suppress(BuildError), layout.locked(wait=False) as held:
+        if held:
+            layout.clean_scratch()
+
+
+def _build(model: Model, key: str, layout: Layout, clock: StageClock, verbose: bool) -> Path:
+    """Build and publish a new version of the package (under the lock); its folder."""
+    find_compiler()
+    with clock.stage("discretise"):
+        discrete = discretise(model)
+    with clock.stage("derive"):
+        derived = derive(discrete)
+    with clock.stage("emit"):
+        src = emit(derived)
+    version = layout.new_version(key)
+    scratch = layout.new_scratch()
+    try:
+        with clock.stage("C compile", interruptible=False):
+            built = _compile(src, key, scratch / "work", clock, verbose)
+        write_package(scratch / "package", derived, src, key, str(model.description or ""),
+                      built, version)
+        previous = layout.publish(scratch / "package", version)
+    finally:
+        shutil.rmtree(scratch, ignore_errors=True)
+    layout.clean(keep={version, previous} - {None})
+    return layout.store / version
+
+
+def _compile(src: CSource, key: str, workdir: Path, clock: StageClock, verbose: bool) -> Path:
+    with writing(workdir, "create"):
+        workdir.mkdir()
+    try:
+        return compile_extension(src.cdef, src.c_source, f"_ext_{key[:16]}", workdir,
+                                 COMPILE_ARGS, clock.remaining(), verbose)
+    except CompileTimeout:
+        raise Expired() from None

@@ -1,0 +1,103 @@
+"""The C compile of the build stage, in a child process (:mod:`symvi.build._cffi_build`).
+
+The cdef and the C source go to the child through files in the scratch folder; the
+compiler's output comes back through the child's pipes and is shown in the
+:class:`~symvi.errors.BuildError` of a failed build (or on stderr with ``verbose``).
+Nothing here changes the working directory or the file descriptors of this process.
+"""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+from pathlib import Path
+
+from ..errors import BuildError
+from .files import write_file
+
+_CHILD = Path(__file__).resolve().with_name("_cffi_build.py")
+# Run the child script by path (not ``-m symvi.build._cffi_build``, which would import symvi
+# and SymPy) and without putting symvi's own folder first on the child's sys.path.
+_BOOTSTRAP = ("import runpy, sys; sys.argv = sys.argv[1:]; "
+              "runpy.run_path(sys.argv[0], run_name='__main__')")
+
+
+class CompileTimeout(Exception):
+    """The compiler was still running at the deadline (it has been killed)."""
+
+
+def compile_extension(cdef: str, c_source: str, module: str, workdir: Path,
+                      args: list[str], timeout: float | None = None,
+                      verbose: bool = False) -> Path:
+    """Build the cffi extension ``module`` in ``workdir``; return its path.
+
+    Raises :class:`BuildError` with the compiler's output if compilation fails and
+    :class:`CompileTimeout` if it runs longer than ``timeout`` seconds.
+    """
+    if not sys.executable:
+        raise BuildError("cannot run the C compile: the path of the Python interpreter "
+                         "(sys.executable) is unknown")
+    workdir = Path(workdir).absolute()     # the child runs in it: relative paths would break
+    spec = _write_inputs(cdef, c_source, module, workdir, args, verbose)
+    returncode, output = _run_child([sys.executable, "-c", _BOOTSTRAP, str(_CHILD), str(spec)],
+                                    workdir, timeout)
+    if verbose and output:
+        print(output, file=sys.stderr, end="" if output.endswith("\n") else "\n")
+    result = workdir / "built.txt"
+    if returncode != 0 or not result.is_file():
+        raise BuildError(f"the C compiler failed on {module}.c (exit status {returncode})\n"
+                         f"--- compiler output ---\n{output.strip()}")
+    return Path(result.read_text())
+
+
+def _write_inputs(cdef: str, c_source: str, module: str, workdir: Path, args: list[str],
+                  verbose: bool) -> Path:
+    files = {"cdef": workdir / "cdef.h", "source": workdir / f"{module}.source.c"}
+    write_file(files["cdef"], cdef)
+    write_file(files["source"], c_source)
+    spec = {"module": module, "args": list(args), "libraries": ["m"], "verbose": verbose,
+            "tmpdir": str(workdir / "build"), "result": str(workdir / "built.txt"),
+            **{k: str(v) for k, v in files.items()}}
+    path = workdir / "spec.json"
+    write_file(path, json.dumps(spec))
+    return path
+
+
+def _run_child(command: list[str], workdir: Path, timeout: float | None) -> tuple[int, str]:
+    """Run ``command`` in its own process group (so that the compiler, a grandchild, is
+    killed with it); return its exit status and its merged stdout and stderr."""
+    if timeout is not None and timeout <= 0:
+        raise CompileTimeout()
+    # The child's stdin is a pipe whose write end only this process holds: if this
+    # process dies, the child sees end of file and kills itself and the compiler.
+    lifeline, keep = os.pipe()
+    try:
+        child = subprocess.Popen(command, cwd=workdir, stdin=lifeline,
+                                 stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+                                 start_new_session=True, text=True, errors="replace")
+    except OSError as exc:
+        os.close(keep)
+        raise BuildError(f"could not start the C compile ({command[0]}): "
+                         f"{exc.strerror or exc}") from None
+    finally:
+        os.close(lifeline)
+    try:
+        output, _ = child.communicate(timeout=timeout)
+    except BaseException as exc:   # the deadline, Ctrl-C, ...: no orphaned compiler
+        _kill_group(child)
+        if isinstance(exc, subprocess.TimeoutExpired):
+            raise CompileTimeout() from None
+        raise
+    finally:
+        os.close(keep)
+    return child.returncode, output
+
+
+def _kill_group(child: subprocess.Popen) -> None:
+    try:
+        os.killpg(child.pid, signal.SIGKILL)
+    except ProcessLookupError:
+        pass
+    child.communicate()

@@ -1,0 +1,105 @@
+"""The files of a generated package: extension, C source, run-time copy, ``__init__.py``
+and manifest, written into a (scratch) folder by :func:`write_package`.
+
+User text (the model's name, description, parameter names, ...) reaches
+``__init__.py`` only as escaped Python literals (:func:`python_string`,
+:func:`python_literal`), never as code.
+"""
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+from typing import Any
+
+from .. import __version__
+from .cache import file_records, write_manifest
+from ..derive import DerivedModel
+from ..emit import CSource, environment
+from ..errors import BuildError
+from .files import write_file, writing
+
+#: The symvi package folder (its sources are part of the cache key).
+PACKAGE = Path(__file__).resolve().parent.parent
+
+
+def runtime_files() -> list[Path]:
+    """The run-time sources copied into every package (``symvi/_runtime/*.py``)."""
+    return sorted((PACKAGE / "_runtime").glob("*.py"))
+
+
+def python_string(text: str) -> str:
+    """``text`` as a Python string literal: triple-quoted (readable, for docstrings)
+    when that reads back exactly, else ``repr``."""
+    plain = ("\\" not in text and '"""' not in text and not text.endswith('"')
+             and all(c.isprintable() or c == "\n" for c in text))
+    if plain:
+        literal = f'"""{text}"""'
+        if ast.literal_eval(literal) == text:
+            return literal
+    return repr(text)
+
+
+def python_literal(value: Any) -> str:
+    """``repr`` of a value built from str, numbers, bools, lists and dicts, checked to
+    read back as that value (a non-finite float would not)."""
+    literal = repr(value)
+    try:
+        same = ast.literal_eval(literal) == value
+    except (ValueError, SyntaxError):
+        same = False
+    if not same:
+        raise BuildError(f"cannot write {literal[:200]} as a Python literal in the generated "
+                         f"__init__.py (a parameter default that is not a finite number?)")
+    return literal
+
+
+def info(dm: DerivedModel, key: str, description: str) -> dict:
+    """The ``INFO`` dict of the package: what the run-time needs to know of the model."""
+    return {
+        "name": dm.name, "kind": dm.kind, "order": dm.order, "source_dim": dm.source_dim,
+        "fibre_dim": dm.fibre_dim, "parameters": [str(s) for s in dm.parameters],
+        "defaults": list(dm.defaults), "has_energy": dm.has_energy,
+        "whole_trajectory": dm.whole_trajectory, "constraints": dm.constraint_count,
+        "controls": dm.control_count, "step_scaled": list(dm.step_scaled),
+        "symmetries": list(dm.symmetries), "gauges": list(dm.gauges),
+        "symvi_version": __version__, "key": key,
+        "configuration_dim": dm.c_context["configuration_dim"],
+        "matrix_dims": [G["matrix_dim"] for G in dm.c_context["groups"]],
+        "description": description,
+        "kernels": {k.name: {"nz": len(k.z), "outputs": [len(M) for _, M in k.outputs]}
+                    for k in dm.kernels},
+    }
+
+
+def _render_init(dm: DerivedModel, key: str, description: str, extension: str,
+                 version: str, imported: dict[str, str]) -> str:
+    env = environment()
+    env.filters.update(pystring=python_string, pyliteral=python_literal)
+    data = info(dm, key, description)
+    defaults = ", ".join(f"{n}={v:g}" for n, v in zip(data["parameters"], dm.defaults))
+    return env.get_template("package_init.py.j2").render(
+        name=dm.name, version=__version__, kind=dm.kind, order=dm.order, info=data,
+        extension=extension, description=description, defaults_text=defaults or "none",
+        version_folder=version, files=imported)
+
+
+def write_package(folder: Path, dm: DerivedModel, src: CSource, key: str, description: str,
+                  built: Path, version: str) -> None:
+    """Write the complete package into the new ``folder`` (manifest last).
+
+    ``built`` is the compiled extension, ``version`` the name of the folder the package
+    will be published as (``__init__.py`` pins its imports to it).
+    """
+    with writing(folder, "create"):
+        (folder / "_runtime").mkdir(parents=True)
+    with writing(built, "read the compiled extension"):
+        extension = built.read_bytes()
+    write_file(folder / built.name, extension)
+    write_file(folder / f"{dm.name}.c", src.c_source)
+    for path in runtime_files():
+        write_file(folder / "_runtime" / path.name, path.read_bytes())
+    imported = {rel: record["sha256"] for rel, record in file_records(folder).items()
+                if not rel.endswith(".c")}
+    init = _render_init(dm, key, description, built.name.split(".")[0], version, imported)
+    write_file(folder / "__init__.py", init)
+    write_manifest(folder, name=dm.name, key=key, extension=built.name, version=version)
