@@ -21,6 +21,8 @@ expressions grow many-fold.
 """
 from __future__ import annotations
 
+import threading
+from collections import OrderedDict
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -386,12 +388,33 @@ def _check_regular(dm: DiscreteModel, step: Kernel) -> None:
             f"Lagrangian does not define a step map (is the Lagrangian degenerate?)")
 
 
+#: Derived models kept in memory, by fingerprint: a model derived again in one process (a
+#: forced rebuild, a symbolic check of a compiled model) is derived once.
+MEMO_SIZE = 32
+_MEMO: OrderedDict[str, DerivedModel] = OrderedDict()
+_MEMO_LOCK = threading.Lock()
+
+
 def derive(dm: DiscreteModel) -> DerivedModel:
     """Derive every kernel of ``dm`` and check that its step map is regular.
 
     Constrained models have no step map (they are solved as whole trajectories); their
-    regularity is that of the bordered Hessian, checked on the continuous model.
+    regularity is that of the bordered Hessian, checked on the continuous model. The
+    result depends on ``dm.fingerprint`` only, and the last :data:`MEMO_SIZE` are kept.
     """
+    with _MEMO_LOCK:
+        if dm.fingerprint in _MEMO:
+            _MEMO.move_to_end(dm.fingerprint)
+            return _MEMO[dm.fingerprint]
+    derived = _derive(dm)
+    with _MEMO_LOCK:
+        _MEMO[dm.fingerprint] = derived
+        while len(_MEMO) > MEMO_SIZE:
+            _MEMO.popitem(last=False)
+    return derived
+
+
+def _derive(dm: DiscreteModel) -> DerivedModel:
     kernels = _kernels(dm)
     if not dm.constraints:
         _check_regular(dm, kernels[0])

@@ -177,6 +177,18 @@ def oscillator(k_default=1.0, quartic=False, name="cache_probe"):
     return Model(name, G, lagrangian=L, parameters={k: k_default})
 
 
+def test_a_model_is_derived_once_per_process():
+    """Derivations are memoised by fingerprint: an equal model (built anew) reuses the
+    derived kernels, a changed default does not."""
+    from symvi.derive import derive
+    from symvi.discretise import discretise
+
+    first = derive(discretise(oscillator(2.5, name="memo_probe")))
+    assert derive(discretise(oscillator(2.5, name="memo_probe"))) is first
+    changed = derive(discretise(oscillator(3.5, name="memo_probe")))
+    assert changed is not first and changed.defaults == (3.5,)
+
+
 def test_unchanged_model_reuses_build(tmp_path):
     mod = compile_model(oscillator(), tmp_path)
     ext = extension_of(tmp_path / "cache_probe")
