@@ -4,7 +4,7 @@ Declare a groupoid and a Lagrangian with SymPy (:class:`Model`), compile it to a
 extension (:func:`compile_model`, or ``symvi compile`` on the command line) and integrate
 with the generated module, which needs numpy and cffi only.
 """
-__version__ = "0.1.0"
+from .version import __version__  # noqa: E402,F401
 
 from .errors import (BuildError, CacheWarning, CompilerNotFoundError,  # noqa: E402
                      DamagedPackageError, ModelError, SymviError)

@@ -83,7 +83,8 @@ from .errors import ModelError
 from .jets import (TIME, _AlgebroidJets, _Jets, _layout, _variational_derivative, component_names,
                    constraint_functions, euler_lagrange_algebroid, unsupported)
 from .model import Model
-from .series import _EXACT, _QQ, _Expander, _is_zero, _Poly, _Series, _series_of, _truncate
+from .series import (_EXACT, _QQ, _Expander, _is_zero, _Poly, _Series, _series_of, _truncate,
+                     expansion_scope)
 
 __all__ = ["TIME", "ResidualExpansion", "ConsistencyReport", "check_consistency", "compact",
            "euler_lagrange", "euler_lagrange_algebroid", "constraint_functions",
@@ -171,6 +172,7 @@ def _to_jets(expr: sp.Matrix, jets, t: sp.Symbol) -> sp.Matrix:
     return sp.Matrix(expr).applyfunc(lambda e: jets.from_functions(e, t))
 
 
+@expansion_scope
 def euler_lagrange(model: Model, t: sp.Symbol = TIME, *, multipliers: bool = True) -> sp.Matrix:
     """The variational derivative E of the action along functions of ``t`` (module doc).
 
@@ -182,7 +184,7 @@ def euler_lagrange(model: Model, t: sp.Symbol = TIME, *, multipliers: bool = Tru
     if model.lagrangian is None:
         raise ModelError(f"model {model.name!r} has no continuous Lagrangian")
     constraints = tuple(model.constraints) if multipliers else ()
-    if model.groupoid.kind == "pair" and not constraints:
+    if model.groupoid.elements_are_node_pairs and not constraints:
         jets = _Jets.make(model.groupoid.names, 2 * model.order)
         return _variational_derivative(model.groupoid, model.lagrangian, model.order,
                                        jets).applyfunc(lambda e: jets.to_functions(e, t))
@@ -203,6 +205,7 @@ def _collect(columns: Sequence[_Series], jets, step, t, through) -> ResidualExpa
                              _jet_terms=tuple(jet_terms))
 
 
+@expansion_scope
 def expand_residual(residual: sp.Matrix, nodes: Sequence[Sequence[sp.Symbol]],
                     step: sp.Symbol, names: Sequence[str], *, centre: int,
                     through: int, t: sp.Symbol = TIME) -> ResidualExpansion:
@@ -268,8 +271,8 @@ def _stencil_atoms(jets: _AlgebroidJets, groupoid, z: Sequence[sp.Symbol], *, el
     atoms = {s: _taylor(base[i], sp.Integer(-centre), degree) for i, s in enumerate(x0)}
     for i, f in enumerate(fs):
         for c, s in enumerate(f):
-            kind, b = layout[c]
-            if kind == "node":      # a pair factor: the target node q(t + (i + 1 − c)h)
+            b = layout[c]
+            if b is not None:       # a pair factor: the target node q(t + (i + 1 − c)h)
                 atoms[s] = _taylor(base[b], sp.Integer(i + 1 - centre), degree)
             else:                   # a group increment: y at the element's middle
                 atoms[s] = _taylor(jets.y[c], sp.Rational(2 * (i - centre) + 1, 2), degree)
@@ -281,6 +284,7 @@ def _stencil_atoms(jets: _AlgebroidJets, groupoid, z: Sequence[sp.Symbol], *, el
     return atoms
 
 
+@expansion_scope
 def sample_stencil(groupoid, z: Sequence[sp.Symbol], step: sp.Symbol, *, elements: int,
                    centre: int, order: int, degree: int, windows: int = 0,
                    multipliers: int = 0, t: sp.Symbol = TIME) -> dict[sp.Symbol, sp.Expr]:
@@ -295,6 +299,7 @@ def sample_stencil(groupoid, z: Sequence[sp.Symbol], step: sp.Symbol, *, element
             for s, a in atoms.items()}
 
 
+@expansion_scope
 def expand_stencil(outputs: sp.Matrix, z: Sequence[sp.Symbol], groupoid, step: sp.Symbol, *,
                    elements: int, centre: int, order: int, through: int,
                    definitions: Sequence[tuple[sp.Symbol, sp.Expr]] = (),
@@ -339,6 +344,7 @@ def _stencil_kernel(model: Model, dm: DerivedModel):
     return dict(kernel.outputs)["residual"], kernel, 0, 0
 
 
+@expansion_scope
 def residual_expansion(model: Model, *, derived: DerivedModel | None = None,
                        terms: int = 2, max_power: int = 7, t: sp.Symbol = TIME,
                        multipliers: bool = True) -> ResidualExpansion:
@@ -353,7 +359,7 @@ def residual_expansion(model: Model, *, derived: DerivedModel | None = None,
     is reached.
     """
     dm = derived if derived is not None else derive(discretise(model))
-    if model.groupoid.kind == "pair" and not model.constraints:
+    if model.groupoid.elements_are_node_pairs and not model.constraints:
         kernel = dm.kernel("step")
         residual = dict(kernel.outputs)["residual"]
         n, r = dm.fibre_dim, dm.order
@@ -378,6 +384,7 @@ def residual_expansion(model: Model, *, derived: DerivedModel | None = None,
         through = min(max_power, through + 2)
 
 
+@expansion_scope
 def constraint_expansion(model: Model, *, derived: DerivedModel | None = None,
                          terms: int = 2, max_power: int = 5,
                          t: sp.Symbol = TIME) -> ResidualExpansion:
@@ -425,6 +432,7 @@ class ConsistencyReport:
                                           or self.constraints.consistent)
 
 
+@expansion_scope
 def check_consistency(model: Model, *, derived: DerivedModel | None = None,
                       lagrangian_model: Model | None = None, multipliers: bool = True,
                       max_power: int = 7) -> ConsistencyReport:

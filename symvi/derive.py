@@ -69,6 +69,9 @@ class DerivedModel:
     kernels: tuple[Kernel, ...]
     whole_trajectory: bool
     has_energy: bool
+    #: Whether an element is the pair of its end nodes (the pair groupoid): initial data
+    #: and boundary data are then nodes (:attr:`Groupoid.elements_are_node_pairs`).
+    node_pairs: bool
     fingerprint: str
     c_context: dict
     #: Analytic coefficient functions (exponential retraction) the C must define.
@@ -414,10 +417,20 @@ def derive(dm: DiscreteModel) -> DerivedModel:
     return derived
 
 
+def _step_kernel(dm: DiscreteModel, kernels: Sequence[Kernel]) -> Kernel:
+    """The kernel of the step map's residual, by name (its place in the list is not fixed)."""
+    step = next((k for k in kernels if k.name == "step"), None)
+    if step is None:
+        raise ModelError(f"model {dm.name!r}: no 'step' kernel was derived (kernels: "
+                         f"{[k.name for k in kernels]}), so its step map cannot be checked "
+                         f"for regularity")
+    return step
+
+
 def _derive(dm: DiscreteModel) -> DerivedModel:
     kernels = _kernels(dm)
     if not dm.constraints:
-        _check_regular(dm, kernels[0])
+        _check_regular(dm, _step_kernel(dm, kernels))
     g = dm.groupoid
     expressions = [e for k in kernels for _, M in k.outputs for e in M] \
         + [e for k in kernels for _, e in k.definitions]
@@ -426,6 +439,7 @@ def _derive(dm: DiscreteModel) -> DerivedModel:
                         fibre_dim=g.fibre_dim, parameters=dm.parameters, defaults=dm.defaults,
                         step=dm.step, kernels=kernels, whole_trajectory=g.whole_trajectory,
                         has_energy=dm.order == 1, fingerprint=dm.fingerprint,
+                        node_pairs=g.elements_are_node_pairs,
                         constraint_count=len(dm.constraints), control_count=len(dm.controls),
                         step_scaled=tuple(g.step_scaled()),
                         symmetries=tuple(z.name for z in dm.symmetries)

@@ -13,58 +13,13 @@ from typing import TYPE_CHECKING
 import sympy as sp
 
 from .groupoids.base import Groupoid
+from .rules import Rule
+from .symbols import h
 
 if TYPE_CHECKING:
     from .model import Model
 
 Slot = tuple[tuple[sp.Symbol, ...], tuple[sp.Symbol, ...]]
-
-#: The time step. It is a run-time argument of every generated function.
-h = sp.Symbol("h", positive=True)
-
-
-@dataclass(frozen=True)
-class Rule:
-    """A named discretisation of a given order (DESIGN.md §3).
-
-    The groupoid supplies its quadrature (:meth:`Groupoid.quadrature`): weighted points
-    (w_i, substitution of the continuous symbols) with L_d = h Σ w_i L(point_i).
-    """
-
-    name: str
-    order: int
-    summary: str
-
-    def applies_to(self, groupoid: Groupoid) -> bool:
-        return self.name in groupoid.rules(self.order)
-
-    def build(self, groupoid: Groupoid, L: sp.Expr, xs, fs, step: sp.Expr) -> sp.Expr:
-        return step * self.average(groupoid, L, xs, fs, step)
-
-    def average(self, groupoid: Groupoid, F: sp.Expr, xs, fs, step: sp.Expr) -> sp.Expr:
-        """Σ w_i F(point_i): the quadrature's weighted mean of F over one window."""
-        return sum(w * F.xreplace(point)
-                   for w, point in groupoid.quadrature(self.name, xs, fs, step))
-
-
-#: Registry of discretisation rules by name.
-RULES: dict[str, Rule] = {r.name: r for r in (
-    Rule("midpoint", 1, "pair: L_d(q0, q1) = h L((q0+q1)/2, (q1-q0)/h)"),
-    Rule("trapezoid", 1, "pair: L_d(q0, q1) = h/2 [L(q0, (q1-q0)/h) + L(q1, (q1-q0)/h)]"),
-    Rule("three_point", 2,
-         "pair: L_d(q0, q1, q2) = h L((q0+q1+q2)/3, (q2-q0)/2h, (q2-2q1+q0)/h^2)"),
-    Rule("lie", 1, "Lie group: L_d(w) = h l(xi), xi = tau^-1(w)/h; action groupoid: "
-                   "h/2 [l(q0, xi) + l(q1, xi)]"),
-    Rule("lie_midpoint", 2, "Lie group: L_d(w0, w1) = h L((xi0+xi1)/2, (xi1-xi0)/h) (paper eq. "
-                            "sdfinal); action groupoid: the base point at the middle node"),
-    Rule("product", 1, "product groupoid: each factor's first-order default, tensor product"),
-    Rule("product2", 2, "product groupoid: each factor's second-order default, tensor product"),
-)}
-
-
-def rule_names() -> list[str]:
-    return sorted(RULES)
-
 
 @dataclass(frozen=True, eq=False)
 class DiscreteModel:
@@ -111,11 +66,11 @@ def discretise(model: "Model") -> DiscreteModel:
     system = model.control_system
     gauges = ()
     if system is not None and system.equations == "variational":
-        Ld, constraints, controls = _variational_control(system, g, RULES[model.discretisation],
+        Ld, constraints, controls = _variational_control(system, g, g.rule(model.discretisation),
                                                          xs, fs)
         gauges = _gauges(model, system, xs[1])
     elif model.lagrangian is not None:
-        rule = RULES[model.discretisation]
+        rule = g.rule(model.discretisation)
         Ld = rule.build(g, model.lagrangian, xs, fs, h)
         constraints = tuple(rule.build(g, c, xs, fs, h) for c in model.constraints)
         controls = tuple(rule.average(g, u, xs, fs, h) for u in model.controls)
@@ -163,7 +118,7 @@ def _variational_control(system, g: Groupoid, rule: Rule, xs, fs):
     node variation, u = −D_a/h on the actuated directions, Φ_d = −D_A on the others
     (both ≈ EL(L), resp. h·EL(L), as the paper's rule gives them) and L̃_d the rule's
     quadrature of the cost at u."""
-    D = node_variation(g, system.lagrangian, RULES[g.default_discretisation(1)], xs, fs)
+    D = node_variation(g, system.lagrangian, g.rules(1)[0], xs, fs)
     controls = tuple(-D[a] / h for a in system.actuated)
     constraints = tuple(-D[A] for A in range(g.fibre_dim) if A not in system.actuated)
     Ld = rule.build(g, system.cost, xs, fs, h).xreplace(dict(zip(system.controls, controls)))
@@ -176,7 +131,7 @@ def mechanical_model(model: "Model") -> DiscreteModel:
     constraints dependent: :mod:`symvi.checks.noether` verifies their invariance there."""
     system, g = model.control_system, model.groupoid
     (X, F), = slots = slot_symbols(g, 1)
-    rule = RULES[g.default_discretisation(1)]
+    rule = g.rules(1)[0]
     names = {name for name, _ in _gauges(model, system, X)}
     return DiscreteModel(name=model.name, groupoid=g, order=1, slots=slots,
                          lagrangian=rule.build(g, system.lagrangian, [X], [F], h), step=h,

@@ -15,7 +15,7 @@ import sympy as sp
 from sympy.printing.c import C99CodePrinter
 from sympy.printing.codeprinter import PrintMethodNotImplementedError
 
-from . import __version__
+from .version import __version__
 from .derive import DerivedModel, Kernel
 from .errors import ModelError
 from .groupoids.analytic import THETA, AnalyticCoefficient, c_definition

@@ -29,7 +29,7 @@ from sympy.core.function import AppliedUndef
 
 from .errors import ModelError
 from .model import Model
-from .series import _GENERATORS, _Poly, _generator
+from .series import _Generators, _Poly, _generator, active_generators, generator_expr, in_scope
 
 #: Time variable of the continuous curve the nodes are sampled from.
 TIME = sp.Symbol("t", real=True)
@@ -119,25 +119,14 @@ def _variational_derivative(groupoid, lagrangian: sp.Expr, order: int, jets: _Je
 # --------------------------------------------------------------------------------------
 # Jets on a Lie algebroid: q(t), y^{(k)}(t) and multipliers λ^{(k)}(t) as plain symbols
 # --------------------------------------------------------------------------------------
-def _layout(groupoid) -> list[tuple[str, int | None]]:
-    """How each fibre coordinate of ``groupoid`` is sampled along a curve.
-
-    ``("node", i)``: a pair factor's fibre part is the target node, base coordinate i;
-    ``("mid", None)``: a group increment ξ, sampled at the middle of the element.
-    """
-    kind = groupoid.kind
-    if kind == "product":
-        out, offset = [], 0
-        for factor in groupoid.factors:
-            out += [(k, None if i is None else i + offset) for k, i in _layout(factor)]
-            offset += factor.source_dim
-        return out
-    if kind == "pair":
-        return [("node", i) for i in range(groupoid.fibre_dim)]
-    if kind in ("lie", "action"):
-        return [("mid", None)] * groupoid.fibre_dim
-    raise ModelError(f"consistency expansions do not know how to sample the fibre of a "
-                     f"{kind!r} groupoid along a curve")
+def _layout(groupoid) -> tuple[int | None, ...]:
+    """How each fibre coordinate of ``groupoid`` is sampled along a curve
+    (:meth:`~symvi.groupoids.base.Groupoid.fibre_sampling`): a base coordinate's index
+    where it is the target node's value, None for an increment at the element's middle."""
+    try:
+        return groupoid.fibre_sampling()
+    except NotImplementedError as exc:
+        raise ModelError(str(exc)) from None
 
 
 def unsupported(groupoid) -> str | None:
@@ -150,14 +139,8 @@ def unsupported(groupoid) -> str | None:
 
 
 def component_names(groupoid) -> tuple[str, ...]:
-    """Names of the residual's components (the fibre directions e_α): a pair factor's
-    coordinate names, a group factor's Lie algebra coordinates."""
-    if groupoid.kind == "pair":
-        return tuple(groupoid.names)
-    algebroid = groupoid.algebroid()
-    base = [str(s) for s in algebroid.q]
-    return tuple(base[i] if kind == "node" else str(y)
-                 for (kind, i), y in zip(_layout(groupoid), algebroid.y))
+    """Names of the residual's components (:meth:`Groupoid.component_names`)."""
+    return tuple(groupoid.component_names())
 
 
 class _AlgebroidJets:
@@ -185,11 +168,14 @@ class _AlgebroidJets:
         self.base_names = tuple(str(s) for s in algebroid.q)
         #: Function name and derivative shift of each fibre coordinate (a pair factor's
         #: y^{(k)} is q^{(k+1)}).
-        self.fibre_functions = tuple((self.base_names[i], 1) if kind == "node" else (str(y), 0)
-                                     for (kind, i), y in zip(self.layout, algebroid.y))
+        self.fibre_functions = tuple((self.base_names[i], 1) if i is not None else (str(y), 0)
+                                     for i, y in zip(self.layout, algebroid.y))
         self.multiplier_names = tuple(multiplier_names or
                                       (f"lambda{a}" for a in range(multipliers)))
         self._base_derivatives = [[s] for s in self.q]
+        #: The generators of the polynomials these jets keep (the derivatives of the base
+        #: coordinates): the expansion's that made them, or their own.
+        self.generators = active_generators() or _Generators()
 
     def symbol_map(self) -> dict:
         """The groupoid's continuous symbols (q, y, ẏ of the algebroid) → jets."""
@@ -214,11 +200,16 @@ class _AlgebroidJets:
 
     def base_derivative(self, i: int, k: int) -> sp.Expr:
         """d^k q_i/dt^k along q̇ = ρ(q) y."""
-        return self.base_derivative_poly(i, k).as_expr()
+        with in_scope(self.generators):
+            return self.base_derivative_poly(i, k).as_expr()
 
     def base_derivative_poly(self, i: int, k: int) -> "_Poly":
         """d^k q_i/dt^k as a coefficient polynomial (the product rule on the polynomial's
-        terms: far faster than ``sympy.diff`` on the growing expanded expressions)."""
+        terms: far faster than ``sympy.diff`` on the growing expanded expressions), in the
+        expansion that made these jets."""
+        if active_generators() is not self.generators:
+            raise RuntimeError("the jets' polynomials are used outside the expansion that "
+                               "made them")
         column = self._base_derivatives[i]
         if not isinstance(column[0], _Poly):
             column[0] = _Poly.of(column[0])
@@ -238,7 +229,7 @@ class _AlgebroidJets:
         for monomial, c in p.terms.items():
             for j, (i, e) in enumerate(monomial):
                 if i not in self._rules:
-                    self._rules[i] = _Poly.of(sp.expand(self.derivative(_GENERATORS[i])))
+                    self._rules[i] = _Poly.of(sp.expand(self.derivative(generator_expr(i))))
                 rule = self._rules[i]
                 if not rule:
                     continue

@@ -15,7 +15,7 @@ from typing import Any, Mapping, Sequence
 
 import sympy as sp
 
-from .discretise import RULES, h, rule_names
+from .symbols import h
 from .errors import ModelError
 from .groupoids.base import Groupoid
 from .rank import generic_rank
@@ -73,7 +73,7 @@ class Model:
 
     Give either a continuous ``lagrangian`` (in the groupoid's continuous symbols, e.g.
     ``G.q``, ``G.qdot`` and, for second order, ``G.qddot``) together with a
-    ``discretisation`` (see :data:`symvi.discretise.RULES`), or a ``discrete_lagrangian``
+    ``discretisation`` (see :data:`symvi.rules.RULES`), or a ``discrete_lagrangian``
     directly (in the groupoid's discrete symbols and :data:`h`) with its ``order``.
 
     Parameters
@@ -178,11 +178,7 @@ class Model:
         g = self.groupoid
         second = [s for s in g.leading_symbols(2) if s in L.free_symbols]
         name = self.discretisation or g.default_discretisation(2 if second else 1)
-        if name not in RULES:
-            raise ModelError(f"unknown discretisation {name!r}; known: {rule_names()}")
-        rule = RULES[name]
-        if not rule.applies_to(g):
-            raise ModelError(f"discretisation {name!r} does not apply to {g!r}")
+        rule = g.rule(name)
         if second and rule.order < 2:
             raise ModelError(f"the Lagrangian depends on {[str(s) for s in second]} (second "
                              f"order) but the discretisation {name!r} is first order; use "

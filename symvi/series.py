@@ -20,7 +20,10 @@ It never calls ``sympy.series``, which is slow on trigonometric Lagrangians.
 """
 from __future__ import annotations
 
+import contextlib
+import functools
 import math
+from contextvars import ContextVar
 from dataclasses import dataclass
 from typing import Mapping, Sequence
 
@@ -37,19 +40,74 @@ _EXACT = 10**9  # "exact to every power": precision of expressions free of h
 # Coefficients: sparse Laurent polynomials in the atoms of the expressions
 # --------------------------------------------------------------------------------------
 _QQ = QQ.dtype
-#: Generators of the coefficient polynomials (jets, parameters, transcendental values such
-#: as sin(q), anything not built by +, ×, integer powers): expression ↔ index.
-_GENERATORS: list[sp.Expr] = []
-_GENERATOR_INDEX: dict[sp.Expr, int] = {}
-_MONOMIAL_PRODUCTS: dict[tuple, tuple] = {}
+
+
+class _Generators:
+    """The generators of one expansion's coefficient polynomials (jets, parameters,
+    transcendental values such as sin(q), anything not built by +, ×, integer powers):
+    expression ↔ index, and a table of monomial products. It lives as long as the
+    outermost call decorated with :func:`expansion_scope`, so nothing outlives a call and
+    threads do not share it."""
+
+    __slots__ = ("exprs", "index", "products")
+
+    def __init__(self):
+        self.exprs: list[sp.Expr] = []
+        self.index: dict[sp.Expr, int] = {}
+        self.products: dict[tuple, tuple] = {}
+
+
+_SCOPE: ContextVar[_Generators | None] = ContextVar("symvi_series_generators", default=None)
+
+
+@contextlib.contextmanager
+def in_scope(table: "_Generators"):
+    """Compute with ``table``'s generators inside the block (an object that keeps
+    polynomials, such as the jets, re-enters the table they were made in)."""
+    token = _SCOPE.set(table)
+    try:
+        yield table
+    finally:
+        _SCOPE.reset(token)
+
+
+def active_generators() -> "_Generators | None":
+    """The generator table of the current expansion, if one is running."""
+    return _SCOPE.get()
+
+
+def expansion_scope(function):
+    """Run ``function`` with a fresh generator table (:class:`_Generators`), or with the
+    caller's when one is active: decorate every entry point that computes with series."""
+    @functools.wraps(function)
+    def scoped(*args, **kwargs):
+        if _SCOPE.get() is not None:
+            return function(*args, **kwargs)
+        with in_scope(_Generators()):
+            return function(*args, **kwargs)
+    return scoped
+
+
+def _table() -> _Generators:
+    table = _SCOPE.get()
+    if table is None:
+        raise RuntimeError("series arithmetic outside an expansion scope: decorate the entry "
+                           "point with symvi.series.expansion_scope")
+    return table
 
 
 def _generator(expr: sp.Expr) -> int:
-    index = _GENERATOR_INDEX.get(expr)
+    table = _table()
+    index = table.index.get(expr)
     if index is None:
-        index = _GENERATOR_INDEX[expr] = len(_GENERATORS)
-        _GENERATORS.append(expr)
+        index = table.index[expr] = len(table.exprs)
+        table.exprs.append(expr)
     return index
+
+
+def generator_expr(index: int) -> sp.Expr:
+    """The expression of generator ``index`` in the current scope."""
+    return _table().exprs[index]
 
 
 def _monomial_product(a: tuple, b: tuple) -> tuple:
@@ -57,8 +115,9 @@ def _monomial_product(a: tuple, b: tuple) -> tuple:
         return b
     if not b:
         return a
+    products = _table().products
     key = (a, b)
-    result = _MONOMIAL_PRODUCTS.get(key)
+    result = products.get(key)
     if result is None:
         exponents = dict(a)
         for i, e in b:
@@ -67,9 +126,9 @@ def _monomial_product(a: tuple, b: tuple) -> tuple:
                 exponents[i] = total
             else:
                 del exponents[i]
-        result = _MONOMIAL_PRODUCTS[key] = tuple(sorted(exponents.items()))
-        if len(_MONOMIAL_PRODUCTS) > 300_000:
-            _MONOMIAL_PRODUCTS.clear()
+        result = products[key] = tuple(sorted(exponents.items()))
+        if len(products) > 300_000:
+            products.clear()
     return result
 
 
@@ -166,7 +225,8 @@ class _Poly:
         return _Poly({((_generator(expr), 1),): _QQ(1)})
 
     def as_expr(self) -> sp.Expr:
-        return sp.Add(*[QQ.to_sympy(c) * sp.Mul(*[_GENERATORS[i]**e for i, e in m])
+        exprs = _table().exprs
+        return sp.Add(*[QQ.to_sympy(c) * sp.Mul(*[exprs[i]**e for i, e in m])
                         for m, c in self.terms.items()])
 
 

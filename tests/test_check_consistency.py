@@ -29,7 +29,8 @@ from sympy.core.function import AppliedUndef
 
 from curves import curve as _f, derivative as _d, parameters as _params
 from conftest import BUNDLED
-from symvi import SO3, ActionGroupoid, MatrixLieGroup, Model, PairGroupoid, ProductGroupoid, h
+from symvi import (SO3, ActionGroupoid, Groupoid, MatrixLieGroup, Model, PairGroupoid,
+                   ProductGroupoid, h)
 from symvi.checks import Context, check, run_check
 from symvi.consistency import (TIME, check_consistency, constraint_expansion, euler_lagrange,
                                euler_lagrange_algebroid, expand_stencil, residual_expansion,
@@ -38,6 +39,7 @@ from symvi.control import euler_lagrange_operator
 from symvi.derive import derive
 from symvi.discretise import discretise
 from symvi.models import get
+from symvi.rules import Rule
 
 t = TIME
 
@@ -282,13 +284,46 @@ def test_discrete_lagrangian_only_is_skipped():
     assert result.status == "skip" and "discrete Lagrangian only" in result.summary
 
 
-def test_unknown_groupoid_kind_is_skipped():
+def test_groupoid_that_cannot_be_sampled_is_skipped():
+    """A groupoid that does not say how its fibre is sampled along a curve (no
+    ``fibre_sampling``) is skipped, naming it."""
     class Odd(PairGroupoid):
-        kind = "odd"
+        def fibre_sampling(self):
+            return Groupoid.fibre_sampling(self)
+
+        def __repr__(self):
+            return "Odd"
     G = Odd("q")
     model = Model(name="odd", groupoid=G, lagrangian=G.qdot[0]**2 / 2 - G.q[0]**2 / 2)
     result = check(model, only=["consistency"])["consistency"]
-    assert result.status == "skip" and "'odd'" in result.summary
+    assert result.status == "skip" and "sample the fibre of Odd" in result.summary
+
+
+def _left_point(g, xs, fs, step):
+    """L_d = h L(q₀, (q₁ − q₀)/h): not symmetric, so R = h·E + O(h²) (order 1)."""
+    (q0,), (q1,) = g.window_nodes(xs, fs)
+    return [(sp.Integer(1), g.point([q0], [(q1 - q0) / step]))]
+
+
+@pytest.mark.parametrize("declared, status", [(2, "fail"), (1, "pass")])
+def test_rule_falling_short_of_its_consistency_order_fails(declared, status):
+    """A rule owns its quadrature and its order: the left-point rule measured at order 1
+    fails when it declares 2 and passes when it declares 1."""
+    rule = Rule(f"left_point_{declared}", 1, "L_d = h L(q0, (q1-q0)/h)", _left_point,
+                consistency_order=declared)
+
+    class LeftPair(PairGroupoid):
+        def rules(self, order):
+            return (rule,) if order == 1 else super().rules(order)
+    G = LeftPair("q")
+    (q,), (v,) = G.q, G.qdot            # a position-dependent mass: no symmetric accident
+    model = Model(name=f"left_{declared}", groupoid=G, discretisation=rule.name,
+                  lagrangian=(1 + q**2) * v**2 / 2 - q**2 / 2)
+    result = check(model, only=["consistency"])["consistency"]
+    assert result.status == status, result.summary
+    assert result.data["order"] == 1
+    if status == "fail":
+        assert "order 1, below the order 2 of the rule 'left_point_2'" in result.summary
 
 
 class SwappedSigns(MatrixLieGroup):

@@ -4,7 +4,6 @@ Depends on numpy (and cffi through the extension) only; SciPy is imported lazily
 whole-trajectory solver. Never imports SymPy or symvi.
 """
 from .compiled import CompiledModel
-from .errors import NewtonError
-from .results import BVPResult, Status, StepResult
+from .results import BVPResult, NewtonError, Status, StepResult
 
 __all__ = ["CompiledModel", "NewtonError", "StepResult", "BVPResult", "Status"]

@@ -32,17 +32,17 @@ def real_array(value, what: str) -> np.ndarray:
             arr = np.asarray(value, dtype=object)
         except (TypeError, ValueError) as exc:   # ragged nesting
             raise ValueError(f"{what} must be an array of numbers: {exc}") from None
-    if arr.dtype.kind == "O":
+    if arr.dtype == object:
         flat = arr.reshape(-1)
         bad = [v for v in flat if not _is_real(v)][:1]
         if bad:
             raise ValueError(f"{what} must be an array of real numbers, got an element "
                              f"{bad[0]!r} of type {type(bad[0]).__name__}")
         return np.array([float(v) for v in flat], dtype=np.float64).reshape(arr.shape)
-    if arr.dtype.kind not in "iuf":
-        kind = {"b": "booleans", "c": "complex numbers", "U": "strings", "S": "bytes"}
+    if not (np.issubdtype(arr.dtype, np.integer) or np.issubdtype(arr.dtype, np.floating)):
+        names = {"b": "booleans", "c": "complex numbers", "U": "strings", "S": "bytes"}
         raise ValueError(f"{what} must be an array of real numbers, got "
-                         f"{kind.get(arr.dtype.kind, f'dtype {arr.dtype}')}")
+                         f"{names.get(arr.dtype.kind, f'dtype {arr.dtype}')}")
     return np.ascontiguousarray(arr, dtype=np.float64)
 
 
@@ -105,6 +105,22 @@ def tolerance(value, what: str) -> float:
     return value
 
 
+def _by_name(given: Mapping, names: Sequence[str]) -> dict[str, object]:
+    """``given`` keyed by parameter name: a key that is not a string (a SymPy symbol,
+    whatever its assumptions) stands for its ``str``. Unknown names and a name given
+    twice (``'m'`` and ``Symbol('m')``) are refused."""
+    named, keys = {}, {}
+    for key, value in given.items():
+        name = key if isinstance(key, str) else str(key)
+        if name in named:
+            raise ValueError(f"parameter {name} is given twice, as {keys[name]!r} and {key!r}")
+        named[name], keys[name] = value, key
+    unknown = sorted(set(named) - set(names))
+    if unknown:
+        raise ValueError(f"unknown parameter(s) {unknown}; the model has {list(names)}")
+    return named
+
+
 def parameters(names: Sequence[str], defaults: Sequence[float],
                given: Mapping[str, float] | Sequence[float] | None) -> np.ndarray:
     """Parameter vector: defaults overridden by a name → value mapping (or a full sequence)."""
@@ -112,11 +128,7 @@ def parameters(names: Sequence[str], defaults: Sequence[float],
     if given is None:
         pass
     elif isinstance(given, Mapping):
-        unknown = set(given) - set(names)
-        if unknown:
-            raise ValueError(f"unknown parameter(s) {sorted(map(str, unknown))}; the model "
-                             f"has {list(names)}")
-        values.update(given)
+        values.update(_by_name(given, names))
     elif isinstance(given, (str, bytes)):
         raise ValueError(f"params must be a mapping name → value or a sequence of "
                          f"{len(names)} numbers, got {given!r}")

@@ -73,19 +73,45 @@ class CompiledModel:
 
     def along_vector(self, kernel: str, x: np.ndarray, f: np.ndarray, h: float,
                      p: np.ndarray, windows: int | None = None) -> np.ndarray:
-        """:meth:`along` with the parameter vector ``p`` already assembled."""
-        spec = self.info["kernels"][kernel]
-        width = (spec["nz"] - self.m) // self.n
-        available = f.shape[0] - width + 1
+        """:meth:`along` with the parameter vector ``p`` already assembled.
+
+        Raises ``ValueError`` when ``windows`` exceeds what the path holds (the C loop
+        would read past the end of ``x`` or ``f``)."""
+        spec = self._along_spec(kernel)
+        x = np.ascontiguousarray(x, dtype=np.float64)
+        f = np.ascontiguousarray(f, dtype=np.float64)
+        available = self._windows_available(kernel, x, f)
         windows = available if windows is None else windows
+        if windows > available:
+            raise ValueError(f"kernel {kernel!r}: {windows} windows asked, but the path "
+                             f"holds {max(available, 0)} (elements f: {f.shape}, base "
+                             f"points x: {x.shape})")
         out = np.zeros((max(windows, 0), spec["outputs"][0]))
         if windows > 0:
-            x = np.ascontiguousarray(x, dtype=np.float64)
-            f = np.ascontiguousarray(f, dtype=np.float64)
             getattr(self.lib, f"symvi_{kernel}_path")(self.ptr(x), self.ptr(f), windows,
                                                       self.ptr(p), arguments.step_size(h),
                                                       self.ptr(out))
         return out
+
+    def _along_spec(self, kernel: str) -> dict:
+        spec = self.info["kernels"].get(kernel)
+        if spec is None or not hasattr(self.lib, f"symvi_{kernel}_path"):
+            along = sorted(k for k in self.info["kernels"] if hasattr(self.lib, f"symvi_{k}_path"))
+            raise ValueError(f"kernel {kernel!r} cannot be evaluated along a path; "
+                             f"those that can: {along}")
+        return spec
+
+    def _windows_available(self, kernel: str, x: np.ndarray, f: np.ndarray) -> int:
+        """Windows of the kernel's width in the path: window i reads base point i and
+        elements i … i + width − 1."""
+        width = (self.info["kernels"][kernel]["nz"] - self.m) // self.n
+        rows = {name: a.shape[0] if a.ndim else 0 for name, a in (("x", x), ("f", f))}
+        if f.size != rows["f"] * self.n or (self.m and x.size != rows["x"] * self.m):
+            raise ValueError(f"kernel {kernel!r}: the path must be base points x (nodes, "
+                             f"{self.m}) and elements f (elements, {self.n}), got x "
+                             f"{x.shape} and f {f.shape}")
+        windows = rows["f"] - width + 1
+        return min(windows, rows["x"]) if self.m else windows
 
     def momenta(self, x: np.ndarray, f: np.ndarray, h: float, params=None) -> np.ndarray:
         """Discrete momenta at every state of a path (see :class:`StepResult`).
@@ -148,7 +174,7 @@ class CompiledModel:
         fibre parts; a Lie group over a point has no base point: ``(g_0, f)``.
         """
         K = self.stencil_elements
-        if self.info["kind"] == "pair":
+        if self.info["node_pairs"]:
             nodes = arguments.finite_array(initial, (K, self.n),
                                            f"initial nodes (the first {K} nodes q_0..q_{K - 1})")
             return nodes.reshape(-1), np.zeros(1)

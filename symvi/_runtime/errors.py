@@ -1,9 +1,8 @@
-"""Errors raised by generated modules."""
+"""Errors raised by generated modules.
 
+:class:`NewtonError` is defined in :mod:`.results`, beside the results it carries, so
+that it is shared by every package of one runtime like them (see there).
+"""
+from .results import NewtonError
 
-class NewtonError(RuntimeError):
-    """Newton's method failed; ``result`` holds the partial result and its message."""
-
-    def __init__(self, result):
-        super().__init__(result.message)
-        self.result = result
+__all__ = ["NewtonError"]

@@ -143,17 +143,17 @@ def initial_path(model, start, end, N: int, guess, p, h):
 GUESSES = ("cubic", "chord")
 
 
-def _interpolated(model, start, end, count: int, kind: str, p):
+def _interpolated(model, start, end, count: int, guess: str, p):
     """Nodes (x, g) with the free ones interpolated, or a failed BVPResult. Without end
     velocities (an end element outside the retraction's chart: :func:`fibres` then
     names it) the chord."""
-    if kind not in GUESSES:
+    if guess not in GUESSES:
         raise ValueError(f"guess must be an array of the free nodes or one of {GUESSES}, "
-                         f"got {kind!r}")
+                         f"got {guess!r}")
     r = model.order
     x = np.concatenate([start[0], np.zeros((count, model.m)), end[0]])
     g = np.concatenate([start[1], np.zeros((count, start[1].shape[1])), end[1]])
-    if kind == "cubic" and r >= 2 and interpolate(model, x, g, r - 1, count + r, p, "",
+    if guess == "cubic" and r >= 2 and interpolate(model, x, g, r - 1, count + r, p, "",
                                                   cubic=True) is None:
         return x, g
     failed = interpolate(model, x, g, r - 1, count + r, p,

@@ -1,12 +1,46 @@
-"""Result objects of the step map and the whole-trajectory solve (cf. ``solve_ivp``)."""
+"""Result objects of the step map and the whole-trajectory solve (cf. ``solve_ivp``).
+
+One result type for every package of one runtime
+------------------------------------------------
+Each generated package carries its own copy of this file, and Python would give every copy
+its own classes: results of two packages would be different types and a pickled result
+would name the (private, per-folder) module of the package that made it. So the copies
+share one set of classes:
+
+* The first copy imported in a process registers itself in ``sys.modules`` under the
+  canonical name :data:`CANONICAL`, ``symvi_runtime_results_<digest>``, the digest being
+  that of this file's bytes; every later copy with the same bytes rebinds its public names
+  (:data:`SHARED`) to that module's. ``symvi._runtime.results`` is one more copy, so symvi
+  takes part too.
+* The digest of the file, not symvi's version, decides what is shared: copies with equal
+  bytes define equal classes, and a runtime whose results changed gets its own name, so a
+  pickle never reaches a class with another layout.
+* Pickling goes through :func:`_rebuild`, which pickle finds as
+  ``symvi_runtime_results_<digest>._rebuild``; it rebuilds a result through its
+  constructor from the fields by name. Unpickling therefore works in any process that has
+  imported a generated package of this runtime, or ``symvi._runtime.results``; in one that
+  has imported neither, pickle raises ``ModuleNotFoundError`` naming the canonical module.
+
+This file imports nothing of its package (its copies must be interchangeable) and needs
+numpy only.
+"""
 from __future__ import annotations
 
 import enum
-from dataclasses import dataclass
+import hashlib
+import sys
+from dataclasses import dataclass, fields
 
 import numpy as np
 
-from .errors import NewtonError
+
+def _canonical_name() -> str:
+    with open(__file__, "rb") as source:
+        return "symvi_runtime_results_" + hashlib.sha256(source.read()).hexdigest()[:16]
+
+
+#: Name of the module whose classes every copy of this file shares (see the docstring).
+CANONICAL = _canonical_name()
 
 
 class Status(enum.IntEnum):
@@ -18,18 +52,74 @@ class Status(enum.IntEnum):
     NON_FINITE = 3
     STALLED = 4
     OUTSIDE_CHART = 5
+    DIVERGED = 6
 
 
-class _Checkable:
+class NewtonError(RuntimeError):
+    """Newton's method failed; ``result`` holds the partial result and its message."""
+
+    def __init__(self, result):
+        super().__init__(result.message)
+        self.result = result
+
+    def __reduce__(self):
+        return NewtonError, (self.result,)
+
+
+def _rebuild(kind: str, state: dict):
+    """A result of class ``kind`` from its fields (the target of pickling)."""
+    return {"StepResult": StepResult, "BVPResult": BVPResult}[kind](
+        **state | {"status": Status(state["status"])})
+
+
+def _brief(values) -> str:
+    """A short text of the last entry of ``values``: a path array, or a tuple of them
+    (one per group factor)."""
+    if values is None:
+        return "None"
+    if isinstance(values, tuple):
+        return "(" + ", ".join(_brief(v) for v in values) + ")"
+    if len(values) == 0:
+        return "[]"
+    last = np.asarray(values[-1])
+    return np.array2string(last, precision=6, threshold=9, edgeitems=1 if last.ndim > 1 else 2,
+                           separator=", ", max_line_width=10**6).replace("\n", "")
+
+
+class _Result:
+    """What both result classes share: status checks, pickling and a short repr."""
+
+    status: Status
+    message: str
+
+    @property
+    def success(self) -> bool:
+        return self.status == Status.SUCCESS
+
+    @property
+    def q(self) -> np.ndarray | None:
+        """Alias of ``x`` (the nodes of a pair-groupoid path)."""
+        return self.x
+
     def raise_for_status(self):
         """Raise :class:`NewtonError` unless the solve succeeded; return self otherwise."""
         if not self.success:
             raise NewtonError(self)
         return self
 
+    def __reduce__(self):
+        state = {f.name: getattr(self, f.name) for f in fields(self)}
+        return _rebuild, (type(self).__name__, state | {"status": int(self.status)})
 
-@dataclass(frozen=True)
-class StepResult(_Checkable):
+    def _summary(self, counts: str, final: dict) -> str:
+        message = self.message if len(self.message) <= 100 else self.message[:99] + "…"
+        finals = ", ".join(f"{name} = {_brief(values)}" for name, values in final.items())
+        return (f"<{type(self).__name__} {self.status.name}: {message!r}; {counts}"
+                f"{'; final ' + finals if finals else ''}>")
+
+
+@dataclass(frozen=True, repr=False)
+class StepResult(_Result):
     """Discrete path computed by the step map.
 
     Attributes
@@ -65,18 +155,15 @@ class StepResult(_Checkable):
     energy: np.ndarray | None = None
     noether: np.ndarray | None = None
 
-    @property
-    def success(self) -> bool:
-        return self.status == Status.SUCCESS
-
-    @property
-    def q(self) -> np.ndarray:
-        """Alias of ``x`` (the nodes of a pair-groupoid path)."""
-        return self.x
+    def __repr__(self) -> str:
+        final = {"x": self.x, "f": self.f} | ({"g": self.g} if self.g is not None else {})
+        end = f", t = {self.t[-1]:.6g}" if len(self.t) else ""
+        return self._summary(f"{len(self.newton_iterations)} steps, {len(self.t)} nodes{end}",
+                             final)
 
 
-@dataclass(frozen=True)
-class BVPResult(_Checkable):
+@dataclass(frozen=True, repr=False)
+class BVPResult(_Result):
     """Whole-trajectory solution with fixed end nodes.
 
     Attributes
@@ -113,11 +200,29 @@ class BVPResult(_Checkable):
     cost: float | None = None
     kind: str = ""
 
-    @property
-    def success(self) -> bool:
-        return self.status == Status.SUCCESS
+    def __repr__(self) -> str:
+        final = {name: getattr(self, name) for name in ("x", "g", "f")
+                 if getattr(self, name) is not None}
+        cost = "" if self.cost is None else f", cost {self.cost:.6g}"
+        return self._summary(f"{max(len(self.t) - 1, 0)} steps, {len(self.t)} nodes, "
+                             f"{self.iterations} Newton iterations{cost}", final)
 
-    @property
-    def q(self) -> np.ndarray | None:
-        """Alias of ``x`` (the nodes of a pair-groupoid path)."""
-        return self.x
+
+#: The names every copy of this file takes from the canonical module.
+SHARED = ("Status", "NewtonError", "StepResult", "BVPResult", "_rebuild")
+
+
+def _share() -> None:
+    """Become the canonical module, or take the classes of the one already registered."""
+    this = sys.modules[__name__]
+    canonical = sys.modules.setdefault(CANONICAL, this)
+    if canonical is this:
+        # pickle finds classes and functions by ``__module__``: point it at the name
+        # every process with this runtime resolves
+        for name in SHARED:
+            globals()[name].__module__ = CANONICAL
+    else:
+        globals().update({name: getattr(canonical, name) for name in SHARED})
+
+
+_share()

@@ -23,6 +23,10 @@ _FAILURE = {
     Status.NON_FINITE: "the residual or the update became non-finite (NaN or inf)",
     Status.OUTSIDE_CHART: ("the increment hξ left the retraction's chart (Cayley: I − hξ/2 "
                            "singular; exp: θ(hξ) ≥ π)"),
+    Status.DIVERGED: ("Newton's iterates diverged (at iteration {iterations} of at most "
+                      "{maxiter}: the update had more than doubled twice in a row, to its "
+                      "largest yet, without contracting); the predictor is outside the "
+                      "basin of the step's solution — try a smaller h"),
 }
 #: Seconds of C between two returns to Python (the latency of Ctrl-C).
 CHUNK_SECONDS = 0.05
@@ -56,8 +60,10 @@ def integrate(model, initial, n_steps: int, h: float, params=None, *, maxiter: i
     A step whose Jacobian is singular (the step map is not defined there) fails with
     ``SINGULAR_JACOBIAN`` even where the residual vanishes, and a run whose path, momenta,
     energies or conserved quantities are not all finite is never a success
-    (``NON_FINITE``). Ctrl-C stops a run within a fraction of a second
-    (``KeyboardInterrupt``).
+    (``NON_FINITE``). A step whose Newton iterates run away (the update more than doubles
+    twice in a row, to its largest yet, without contracting) fails with ``DIVERGED``
+    within a few iterations instead of iterating to ``maxiter``. Ctrl-C stops a run
+    within a fraction of a second (``KeyboardInterrupt``).
     """
     n_steps = arguments.count(n_steps, "n_steps")
     keep = arguments.count(keep_every, "keep_every", 1)
@@ -68,12 +74,12 @@ def integrate(model, initial, n_steps: int, h: float, params=None, *, maxiter: i
     K = model.stencil_elements
     check_memory(model, K - 1 + n_steps, keep, BUFFER_STEPS if keep > 1 else 0)
     run = _Run(model, n_steps, keep, p, h)
-    code, steps, rnorm = run.loop(z0, g0, maxiter, xtol, ftol)
+    code, steps, rnorm, iterations = run.loop(z0, g0, maxiter, xtol, ftol)
     status = Status(code)
     if status == Status.SUCCESS:
         message = f"integrated {n_steps} steps"
     else:
-        reason = _FAILURE[status].format(maxiter=maxiter)
+        reason = _FAILURE[status].format(maxiter=maxiter, iterations=iterations)
         message = (f"step {steps} (to t = {(K + steps) * h:.6g}) failed: {reason}; "
                    f"residual norm {rnorm:.3e}")
     result = run.result(steps, status, message)
@@ -144,8 +150,10 @@ class _Run:
             self.g = np.zeros((K + steps if G else 1, max(G, 1)))
             self.iters = np.zeros(steps, np.intc)
 
-    def loop(self, z0, g0, maxiter: int, xtol: float, ftol: float) -> tuple[int, int, float]:
-        """Run the chunks; returns (status code, steps done, last residual norm)."""
+    def loop(self, z0, g0, maxiter: int, xtol: float,
+             ftol: float) -> tuple[int, int, float, int]:
+        """Run the chunks; returns (status code, steps done, last residual norm, Newton
+        iterations of the last step tried)."""
         model, K = self.model, self.model.stencil_elements
         done, rnorm = model.ffi.new("long *"), model.ffi.new("double *")
         start, chunk = 0, 4096
@@ -162,7 +170,8 @@ class _Run:
             finished = code != 0 or start + size == self.n_steps
             self._store(start, int(done[0]), finished)
             if finished:
-                return code, start + int(done[0]), float(rnorm[0])
+                tried = self._iterations_at(at + int(done[0])) if code else 0
+                return code, start + int(done[0]), float(rnorm[0]), tried
             # the next chunk starts from the stencil this one slid to
             z0 = np.concatenate([x[size], f[size: size + K - 1].reshape(-1)])
             g0 = g[size].copy() if self.G else g0
@@ -171,6 +180,11 @@ class _Run:
                 self.g[0] = g[size] if self.G else 0.0
             start += size
             chunk = int(min(max(size * CHUNK_SECONDS / max(elapsed, 1e-6), 1024), 2**30))
+
+    def _iterations_at(self, index: int) -> int:
+        """Newton iterations of the step at ``index`` of the buffer: a failed step writes
+        them where a completed one would (0 if the first elements failed before any step)."""
+        return int(self.iters[index]) if index < len(self.iters) else 0
 
     def _store(self, start: int, done: int, finished: bool) -> None:
         """Store what the chunk that began at step ``start`` computed: its ``done`` new

@@ -2,15 +2,17 @@
 
 The only stage that touches the filesystem. ``DIR/<name>`` is a relative symlink to a
 version folder ``DIR/.<name>/<version>/``, replaced atomically by each build (layout,
-swap and clean-up: :mod:`symvi.build.swap`). A build is cached under a content hash of the
-model (its description included), the templates, the compile flags, symvi's sources
-and version, and reused only after every file of the package has been checked against
-the hashes of its manifest (:mod:`symvi.build.cache`); a damaged build is rebuilt with a
-:class:`~symvi.errors.CacheWarning`. Builds of one package are serialised by a lock;
-the C compile runs in a child process (:mod:`symvi.build.ccompile`), so that builds from
-several threads of one process do not disturb each other, and gives a bitwise
-reproducible extension. An interrupted or failed build leaves the previous package (or
-none) in place and debris that the next build removes.
+swap and clean-up: :mod:`symvi.build.swap`). A build is cached under a content hash of
+what determines its files (:func:`cache_key`: the model and its description, the
+templates, the run-time files, the sources of the code that generates them, the
+compiler and its flags) and reused only after every file of the package has been
+checked against the hashes of its manifest (:mod:`symvi.build.cache`); a damaged build
+is rebuilt with a :class:`~symvi.errors.CacheWarning`. Builds of one package are
+serialised by a lock (POSIX and Windows); the C compile runs in a child process
+(:mod:`symvi.build.ccompile`), so that builds from several threads of one process do not
+disturb each other, and gives a bitwise reproducible extension. An interrupted or
+failed build leaves the previous package (or none) in place and debris that the next
+build removes.
 """
 from __future__ import annotations
 
@@ -27,8 +29,9 @@ import warnings
 from pathlib import Path
 from types import ModuleType
 
-from .. import __version__
-from .cache import MANIFEST, inspect, problems, read_manifest, summary
+from ..version import __version__
+from .cache import (MANIFEST, compiler_command, compiler_identity, files_digest, inspect,
+                    library_versions, problems, read_manifest, sources_digest, summary)
 from .ccompile import CompileTimeout, compile_extension
 from ..derive import derive
 from ..discretise import discretise
@@ -36,7 +39,7 @@ from ..emit import CSource, emit, templates_digest
 from ..errors import BuildError, CacheWarning, CompilerNotFoundError, DamagedPackageError
 from .files import writing
 from ..model import Model
-from .package import PACKAGE, write_package
+from .package import runtime_files, write_package
 from .stages import Expired, Progress, StageClock
 from .swap import Layout, ensure_folder
 
@@ -51,25 +54,54 @@ _LOAD_LOCK = threading.RLock()
 
 
 def cache_key(model: Model) -> str:
-    """Content hash of everything that determines the generated package.
+    """Content hash of everything that determines the generated package's files.
 
-    The model (its fingerprint and its description, which the package's docstring and
-    ``INFO`` carry), the templates, the compile flags, the symvi version and symvi's own
-    sources (the derivation code and the run-time files copied into the package).
+    Hashed, each part separately (so that no two parts can run into each other):
+
+    * the model: its fingerprint and its description (the package's docstring and
+      ``INFO`` carry it);
+    * symvi's version (written into ``INFO`` and the C source's header);
+    * the templates (:func:`~symvi.emit.templates_digest`) and the run-time files copied
+      into the package (``symvi/_runtime/*.py``), read from disk as the build would;
+    * the sources of every symvi module that generates the files: the closure of the
+      symvi-internal imports of the modules the build runs, without the checks, the
+      command line, the bundled model files and the build's own orchestration, lock and
+      swap (:func:`~symvi.build.cache.generating_sources`);
+    * the compile: :data:`COMPILE_ARGS`, the compiler cffi would run and the flags
+      setuptools adds (:func:`~symvi.build.cache.compiler_identity`), Python's extension
+      suffix (its ABI), and the versions of SymPy (simplifies and prints the C), Jinja2
+      (renders it) and cffi (writes the wrapper, drives the compile).
+
+    Editing a check, the command line or the build's lock therefore reuses every build.
+    The sources, the compiler's files and the libraries' versions are read once per
+    process (the code that runs is the code loaded then); the rest at each call.
     """
     h = hashlib.sha256()
-    for part in (__version__, templates_digest(), model.fingerprint(),
-                 str(model.description or ""), " ".join(COMPILE_ARGS)):
-        h.update(part.encode("utf-8", "surrogatepass") + b"\0")
-    for path in sorted(PACKAGE.rglob("*.py")):
-        h.update(str(path.relative_to(PACKAGE)).encode() + path.read_bytes())
+    for label, value in _key_parts(model):
+        h.update(hashlib.sha256(f"{label}\0{value}".encode("utf-8", "surrogatepass")).digest())
     return h.hexdigest()
+
+
+def _key_parts(model: Model) -> list[tuple[str, str]]:
+    """The inputs of :func:`cache_key`, labelled."""
+    classes = (type(model), type(model.control_system))
+    return [
+        ("model", model.fingerprint()),
+        ("description", str(model.description or "")),
+        ("symvi", __version__),
+        ("templates", templates_digest()),
+        ("runtime", files_digest(runtime_files())),
+        ("sources", sources_digest(c.__module__ for c in classes)),
+        ("compile args", "\0".join(COMPILE_ARGS)),
+        ("compiler", compiler_identity()),
+        ("python", str(sysconfig.get_config_var("EXT_SUFFIX"))),
+        ("libraries", library_versions()),
+    ]
 
 
 def find_compiler() -> str:
     """The C compiler cffi will run; raise :class:`CompilerNotFoundError` if it is missing."""
-    command = os.environ.get("CC") or sysconfig.get_config_var("CC") or "cc"
-    executable = shlex.split(command)[0]
+    executable = shlex.split(compiler_command())[0]
     if shutil.which(executable) is None:
         raise CompilerNotFoundError(
             f"no C compiler found: cffi would run {executable!r} (from $CC or Python's build "

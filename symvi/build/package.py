@@ -8,10 +8,11 @@ User text (the model's name, description, parameter names, ...) reaches
 from __future__ import annotations
 
 import ast
+import importlib
 from pathlib import Path
 from typing import Any
 
-from .. import __version__
+from ..version import __version__
 from .cache import file_records, write_manifest
 from ..derive import DerivedModel
 from ..emit import CSource, environment
@@ -20,6 +21,11 @@ from .files import write_file, writing
 
 #: The symvi package folder (its sources are part of the cache key).
 PACKAGE = Path(__file__).resolve().parent.parent
+
+# Importing symvi registers the result classes of its run-time files under their
+# canonical name (see ``_runtime/results.py``), so that a process with symvi unpickles
+# the results of the packages built from them without importing one.
+importlib.import_module(f"{__package__.rpartition('.')[0]}._runtime.results")
 
 
 def runtime_files() -> list[Path]:
@@ -59,6 +65,7 @@ def info(dm: DerivedModel, key: str, description: str) -> dict:
         "name": dm.name, "kind": dm.kind, "order": dm.order, "source_dim": dm.source_dim,
         "fibre_dim": dm.fibre_dim, "parameters": [str(s) for s in dm.parameters],
         "defaults": list(dm.defaults), "has_energy": dm.has_energy,
+        "node_pairs": dm.node_pairs,
         "whole_trajectory": dm.whole_trajectory, "constraints": dm.constraint_count,
         "controls": dm.control_count, "step_scaled": list(dm.step_scaled),
         "symmetries": list(dm.symmetries), "gauges": list(dm.gauges),

@@ -5,7 +5,7 @@ For a model ``NAME`` compiled into ``DIR``::
     DIR/NAME -> .NAME/<version>     relative symlink: the package Python imports
     DIR/.NAME/<version>/            one complete build (never modified once published)
     DIR/.NAME/build-*/              scratch folder of a build in progress (or killed)
-    DIR/.NAME/lock                  held (flock) by the one build allowed at a time
+    DIR/.NAME/lock                  held (:class:`FileLock`) by the one build at a time
 
 A build is written into a scratch folder, renamed to ``<version>`` (the cache key's
 first 16 hex digits and a nonce) and published by replacing ``DIR/NAME`` with a new
@@ -15,14 +15,19 @@ except the version it replaced, which a process that was importing it during the
 may still be reading; that one goes at the next publish. A build killed at any point
 leaves a ``build-*`` folder, a temporary ``link-*`` or an unlinked version, all of
 which the next build removes.
+
+The lock (:class:`FileLock`) is ``flock`` on POSIX and a lock on the lock file's first
+byte (``msvcrt.locking``) on Windows; either excludes other processes and other threads
+of this process.
 """
 from __future__ import annotations
 
 import contextlib
-import fcntl
+import errno
 import os
 import shutil
 import tempfile
+import time
 import uuid
 from pathlib import Path
 from typing import Iterator
@@ -30,10 +35,88 @@ from typing import Iterator
 from ..errors import BuildError
 from .files import READ_ONLY, describe_os_error, writing
 
+try:
+    import fcntl
+except ImportError:          # Windows
+    fcntl = None
+    import msvcrt
+
 LOCK = "lock"
 SCRATCH = "build-"
 _TEMP_LINK = "link-"
 _LEGACY = "legacy-"
+#: errno of ``msvcrt.locking`` when another handle holds the byte: EACCES for the
+#: non-blocking try used here (EDEADLOCK is the CRT's "gave up" of its waiting modes).
+_BUSY = {errno.EACCES, getattr(errno, "EDEADLOCK", errno.EDEADLK)}
+#: How often (seconds) a blocking acquire on Windows tries again: ``msvcrt`` has no
+#: lock that waits indefinitely, and a short poll keeps Ctrl-C responsive.
+_POLL = 0.05
+
+
+class FileLock:
+    """An exclusive lock on the file ``path`` (created if missing), between processes
+    and between the threads of one process.
+
+    Each instance opens the file anew, and a lock belongs to that open file (POSIX
+    ``flock``: to the open file description; Windows ``msvcrt.locking``: to the file
+    handle), so two instances exclude each other wherever they are. An instance is
+    used by one thread at a time. Opening raises ``OSError``; closing releases.
+    """
+
+    def __init__(self, path: Path):
+        self.path = path
+        self._fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+
+    def acquire(self, wait: bool = True) -> bool:
+        """Take the lock, waiting for it unless ``wait`` is off; whether it is held."""
+        return _lock(self._fd, wait)
+
+    def release(self) -> None:
+        """Give the lock up."""
+        _unlock(self._fd)
+
+    def close(self) -> None:
+        """Close the file (which releases the lock if it is held)."""
+        os.close(self._fd)
+
+    def __enter__(self) -> FileLock:
+        return self
+
+    def __exit__(self, *exc_info) -> None:
+        self.close()
+
+
+if fcntl is not None:
+    def _lock(fd: int, wait: bool) -> bool:
+        """Lock the open file ``fd`` (waiting unless not ``wait``); whether it is locked."""
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
+        except BlockingIOError:
+            return False
+        return True
+
+    def _unlock(fd: int) -> None:
+        """Unlock the open file ``fd``."""
+        fcntl.flock(fd, fcntl.LOCK_UN)
+else:
+    def _lock(fd: int, wait: bool) -> bool:
+        while True:
+            # msvcrt locks the bytes from the file position on: always byte 0 (the
+            # file is empty; Windows allows locking beyond its end).
+            os.lseek(fd, 0, os.SEEK_SET)
+            try:
+                msvcrt.locking(fd, msvcrt.LK_NBLCK, 1)
+                return True
+            except OSError as exc:
+                if exc.errno not in _BUSY:
+                    raise
+            if not wait:
+                return False
+            time.sleep(_POLL)
+
+    def _unlock(fd: int) -> None:
+        os.lseek(fd, 0, os.SEEK_SET)
+        msvcrt.locking(fd, msvcrt.LK_UNLCK, 1)
 
 
 def not_writable(folder: Path) -> BuildError:
@@ -60,22 +143,20 @@ class Layout:
         """
         try:
             self.store.mkdir(exist_ok=True)
-            handle = open(self.store / LOCK, "a+")
+            lock = FileLock(self.store / LOCK)
         except OSError as exc:
             if exc.errno in READ_ONLY:
                 raise not_writable(self.out) from None
             raise BuildError(f"could not create the build lock {self.store / LOCK}: "
                              f"{describe_os_error(exc)}") from None
-        with handle:
-            try:
-                fcntl.flock(handle, fcntl.LOCK_EX | (0 if wait else fcntl.LOCK_NB))
-            except BlockingIOError:
+        with lock:
+            if not lock.acquire(wait):
                 yield False
                 return
             try:
                 yield True
             finally:
-                fcntl.flock(handle, fcntl.LOCK_UN)
+                lock.release()
 
     # -- building and publishing ----------------------------------------------------------
     def new_scratch(self) -> Path:

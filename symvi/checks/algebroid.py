@@ -78,11 +78,7 @@ def algebra_closure(basis: Sequence[sp.Matrix], constants: dict) -> list[str]:
 
 
 def _groups(groupoid: Groupoid) -> list[MatrixLieGroup]:
-    if isinstance(groupoid, MatrixLieGroup):
-        return [groupoid]
-    if hasattr(groupoid, "group"):
-        return [groupoid.group]
-    return [G for factor in getattr(groupoid, "factors", ()) for G in _groups(factor)]
+    return list(groupoid.matrix_groups())
 
 
 def run(ctx) -> CheckResult:

@@ -16,8 +16,9 @@ action —
 
 and reports p, the sign and the order (next power − leading power: the relative error of
 the residual as an approximation of h^p·E). A correct symmetric rule gives +h·E + O(h³),
-order 2. Otherwise it fails and names, per component, the leading coefficient, the
-expected one and their difference.
+order 2. It fails when the leading term is not ±h^p·E — naming, per component, the
+leading coefficient, the expected one and their difference — or when the order falls
+short of the rule's declared ``consistency_order`` (:mod:`symvi.rules`).
 
 Skipped: models declared with a discrete Lagrangian only (there is no continuous equation;
 :func:`symvi.consistency.check_consistency` takes a continuous reference model), groupoids
@@ -37,30 +38,16 @@ from .report import CheckResult
 
 NAME = "consistency"
 
-_SAMPLING = {
-    "pair": "nodes q_j = q(t + jh)",
-    "lie": "increments ξ_i = y(t + (i + ½)h) (element midpoints)",
-    "action": "increments ξ_i = y(t + (i + ½)h), base points x_0 = q(t_0), x_{j+1} = "
-              "β(x_j, ξ_j)",
-    "product": "pair factors at nodes, group factors at element midpoints, base points "
-               "from β",
-}
-
-
 def _equation(model) -> str:
     """What E is, in words."""
-    r, kind = model.order, model.groupoid.kind
-    if kind == "pair" and not model.constraints:
+    r, groupoid = model.order, model.groupoid
+    if groupoid.elements_are_node_pairs and not model.constraints:
         return ("E(L) = ∂L/∂q − d/dt ∂L/∂q̇" if r == 1
                 else "E(L) = ∂L/∂q − d/dt ∂L/∂q̇ + d²/dt² ∂L/∂q̈")
     operator = "EL(L)" if r == 1 else "EL₂(L̃)"
     if model.constraints:
         operator = "EL₂(L̃ + λ_A Φ^A)"
-    where = {"pair": "on TQ",
-             "lie": "Euler–Poincaré" if r == 1 else "second-order Euler–Poincaré",
-             "action": "on the action algebroid",
-             "product": "on the product algebroid"}.get(kind, "on the Lie algebroid")
-    return f"E = −{operator} ({where})"
+    return f"E = −{operator} ({groupoid.equation_setting(r)})"
 
 
 def _term(sign: int | None, power: int | None, what: str = "E") -> str:
@@ -117,7 +104,7 @@ def run(ctx) -> CheckResult:
     seconds = round(time.perf_counter() - start, 3)
     names = component_names(model.groupoid)
     e = report.expansion
-    sampling = _SAMPLING.get(model.groupoid.kind, "")
+    sampling = model.groupoid.sampling_text
     if model.constraints:
         sampling += "; multipliers λ^w = λ(t_w) at their window's middle node"
     data = {**_describe(report), "equation": _equation(model), "sampling": sampling,
@@ -134,6 +121,11 @@ def run(ctx) -> CheckResult:
         problems.append(f"the residual vanishes through h^{e.through}" if report.power is None
                         else f"the residual's leading term h^{report.power} is not "
                              f"±h^{report.power}·E in {', '.join(bad)}")
+    rule = model.groupoid.rule(model.discretisation)
+    if report.sign is not None and report.order is not None \
+            and report.order < rule.consistency_order:
+        problems.append(f"the residual is consistent to order {report.order}, below the order "
+                        f"{rule.consistency_order} of the rule {rule.name!r}")
     if report.constraints is not None:
         c = report.constraints
         data["constraints"] = _describe(c)

@@ -1,7 +1,7 @@
 """Check ``equations``: are hand-derived equations the ones symvi derives? (issue 5, item 7)
 
 A user hands over equations — their own, or copied from a paper — as
-:class:`HandDerived` objects, each naming the derived object it claims to reproduce (its
+:class:`~symvi.checks.hand.HandDerived` objects (re-exported here), each naming the derived object it claims to reproduce (its
 ``target``). :func:`compare` decides, and says where they differ:
 
 * ``mode="equations"`` (controlled equations, constraints, discrete constraints, the
@@ -24,13 +24,13 @@ fixtures (:mod:`symvi.fixtures`), where this check reproduces ``ERRATA.md``.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, field, replace
-from typing import Any, Mapping, Sequence
+from dataclasses import dataclass, replace
 
 import sympy as sp
 
 from ..discretise import DiscreteModel, discretise
 from ..errors import ModelError
+from .hand import HandDerived
 from .equivalence import (Hand, coefficient_note, in_controls, is_zero, limit_note,
                           linear_unknowns, matrix_rank, scaled_increments, show, solve_linear)
 from .spaces import CONTINUOUS, Space, symbol_space
@@ -38,114 +38,7 @@ from .report import CheckResult
 
 NAME = "equations"
 
-#: target → the derived object it names (paper reference).
-TARGETS: dict[str, str] = {
-    "controls": "controlled equations u_a = EL(L)_a, the model's controls (§3.3, eq. costLtilde)",
-    "constraints": "unactuated equations Φ^A = EL(L)_A = 0, the model's constraints (§3.3.2)",
-    "euler_lagrange": "continuous Euler–Lagrange equations EL_r(L + λ_AΦ^A) = 0 with the "
-                      "constraints Φ^A = 0 (§3.3.2, Appendix C.2)",
-    "lagrangian": "continuous Lagrangian L̃ = C(q, y, EL(L)_a) (eq. costLtilde, LagCont)",
-    "discrete_lagrangian": "L_d on one window (DESIGN.md §3, eq. sdfinal)",
-    "discrete_constraints": "Φ^A_d = h Σ w Φ^A(point) on one window (§3.2, eq. constrainedso)",
-    "discrete_action": "discrete cost Σ_k L_d over the windows of a trajectory of `elements` "
-                       "elements (§2.2, eq. hamprinc)",
-    "target_map": "target β(g) of one element (action groupoid: φ(q, τ(hξ)))",
-    "residual": "discrete Euler–Lagrange / Euler–Poincaré residual at a stencil's middle node "
-                "(§2.2, eq. delelg)",
-}
-_VALUE_ONLY = ("lagrangian", "discrete_lagrangian", "discrete_action", "target_map")
-
-
-@dataclass(frozen=True, eq=False)
-class HandDerived:
-    """Hand-derived equations (or expressions) claimed to reproduce one derived object.
-
-    Parameters
-    ----------
-    name:
-        Where they come from (``"paper eq. CuerpoRigido"``); failures are located by it.
-    target:
-        Which derived object they claim to be (:data:`TARGETS`).
-    expressions:
-        The hand equations: expressions meaning ``= 0``, ``sympy.Eq`` or a Matrix of them
-        (``mode="equations"``), or the claimed values (``mode="value"``, one per derived
-        expression, in order).
-    symbols:
-        The user's own symbols (names or Symbols) → expressions in the model's symbols,
-        e.g. ``{"u1": tau1/I1, "P1": I1/(I2 - I3), "xi1[k]": "Omega1_0"}``; values may use
-        other keys. Symbols are matched by name. Model symbols: continuous targets use the
-        groupoid's continuous symbols (``Omega1``, ``Omega1_dot``, ``theta1_ddot``, …),
-        the parameters and the control symbols ``controls``; discrete targets and
-        ``target_map`` the groupoid's discrete symbols of one window
-        (``groupoid.discrete_symbols(order)``: ``Omega1_0``, ``Omega1_1`` the ξ of its two
-        elements, ``theta1_0 … theta1_2`` the pair nodes, ``Gamma1`` the first base point)
-        plus ``Gamma1_j`` for the base point at node j, the parameters and ``h``;
-        ``residual`` the discrete symbols of the 2r elements of its stencil,
-        ``discrete_action`` those of its ``elements`` elements; ``euler_lagrange`` the
-        jets of :func:`symvi.jets.continuous_equations` (``Omega1_dddot``, ``theta1_d4``,
-        ``lambda1_dot``), or functions of time (``Omega1(t)``, ``lambda1(t)``, their
-        derivatives; the base point's follow from the anchor).
-    mode:
-        ``"equations"`` (same solution set) or ``"value"`` (equal); default ``"value"``
-        for Lagrangians and the target map, ``"equations"`` otherwise.
-    labels:
-        A name per expression (default ``eq. 1``, ``eq. 2``, …).
-    select:
-        Indices of the derived expressions compared (default all), e.g. the first three
-        coordinates of the target map.
-    controls:
-        Names of the symbols standing for the model's controls (default ``u1 … um``): in
-        ``"controls"`` they are the unknowns of EL(L)_a − u_a = 0, elsewhere a hand
-        expression in them is compared with the derived one written in them.
-    unknowns:
-        Unknowns to solve the derived equations for (default: chosen automatically).
-    model:
-        The model these equations describe, when it is not the checked one.
-    elements:
-        Number of elements of the trajectory of ``discrete_action`` (its symbols are those
-        of ``elements`` slots: ``Omega1_0`` … ``Omega1_{elements-1}``, pair nodes
-        ``theta1_0`` … ``theta1_{elements}``).
-    """
-
-    name: str
-    target: str
-    expressions: Any
-    symbols: Mapping[Any, Any] = field(default_factory=dict)
-    mode: str | None = None
-    labels: Sequence[str] = ()
-    select: Sequence[int] | None = None
-    controls: Sequence[Any] = ()
-    unknowns: Sequence[Any] = ()
-    model: Any = None
-    elements: int = 4
-
-    def __post_init__(self) -> None:
-        if self.target not in TARGETS:
-            raise ValueError(f"{self.name}: unknown target {self.target!r}; targets: "
-                             f"{', '.join(TARGETS)}")
-        mode = self.mode or ("value" if self.target in _VALUE_ONLY else "equations")
-        if mode not in ("equations", "value"):
-            raise ValueError(f"{self.name}: mode must be 'equations' or 'value', got {mode!r}")
-        if mode == "equations" and self.target in _VALUE_ONLY:
-            raise ValueError(f"{self.name}: target {self.target!r} compares values; use "
-                             f"mode='value'")
-        exprs = self.expressions
-        if isinstance(exprs, (sp.Basic, str)) and not isinstance(exprs, sp.MatrixBase):
-            exprs = [exprs]
-        exprs = tuple(_as_expression(e) for e in list(exprs))
-        labels = tuple(self.labels) or tuple(f"eq. {i + 1}" for i in range(len(exprs)))
-        if len(labels) != len(exprs):
-            raise ValueError(f"{self.name}: {len(labels)} labels for {len(exprs)} expressions")
-        symbols = {_name(k): sp.sympify(v) for k, v in dict(self.symbols).items()}
-        object.__setattr__(self, "mode", mode)
-        object.__setattr__(self, "expressions", exprs)
-        object.__setattr__(self, "labels", labels)
-        object.__setattr__(self, "symbols", symbols)
-        object.__setattr__(self, "controls", tuple(_name(c) for c in self.controls))
-        object.__setattr__(self, "unknowns", tuple(_name(u) for u in self.unknowns))
-        if self.select is not None:
-            object.__setattr__(self, "select", tuple(int(i) for i in self.select))
-
+__all__ = ["NAME", "HandDerived", "Comparison", "compare", "run"]
 
 @dataclass(frozen=True)
 class EquationResult:
@@ -187,15 +80,6 @@ class Comparison:
 
 
 # -- helpers ------------------------------------------------------------------------------
-def _name(symbol) -> str:
-    return symbol if isinstance(symbol, str) else symbol.name
-
-
-def _as_expression(e) -> sp.Expr:
-    e = sp.sympify(e)
-    return e.lhs - e.rhs if isinstance(e, sp.Equality) else e
-
-
 # -- the comparison -----------------------------------------------------------------------
 def compare(hand: HandDerived, model=None, discrete: DiscreteModel | None = None,
             derived=None) -> Comparison:

@@ -21,7 +21,7 @@ from ..rank import generic_rank
 from .spaces import Space
 
 if TYPE_CHECKING:
-    from .equations import HandDerived
+    from .hand import HandDerived
 
 _MAX_GROUPS = 8
 

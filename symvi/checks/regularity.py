@@ -73,7 +73,7 @@ def run(ctx) -> CheckResult:
     n = J.shape[0]
     rank = generic_rank(J, st.z, fixed, definitions=st.definitions, seed=ctx.seed)
     what = "bordered step matrix" if dm.constraints else \
-        {1: "D₁₂L_d", 2: "D₁₃L_d"}[dm.order] + (" analogue" if dm.groupoid.kind != "pair" else "")
+        dm.groupoid.step_matrix_name(dm.order)
     names = readable(st, dm.groupoid)
     if rank is None:
         return CheckResult.failed(NAME, f"the {what} is not finite at any sample point")

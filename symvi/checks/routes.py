@@ -50,12 +50,11 @@ SAMPLES = 3
 
 # -- route 1: the engine's residual --------------------------------------------------------
 def _direction_names(G) -> list[str]:
-    names = getattr(G, "names", None)
-    if hasattr(G, "factors"):
-        names = [s for F in G.factors for s in _direction_names(F)]
-    elif hasattr(G, "group"):
-        names = list(G.group.names)
-    names = list(names) if names is not None and len(names) == G.fibre_dim else None
+    try:
+        names = list(G.component_names())
+    except NotImplementedError:     # a groupoid that does not name its directions
+        names = None
+    names = names if names is not None and len(names) == G.fibre_dim else None
     return [f"e_{a + 1}" + (f" ({names[a]})" if names else "") for a in range(G.fibre_dim)]
 
 

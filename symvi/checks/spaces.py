@@ -19,7 +19,7 @@ from ..errors import ModelError
 from ..jets import continuous_equations
 
 if TYPE_CHECKING:
-    from .equations import HandDerived
+    from .hand import HandDerived
 
 #: Targets compared in the continuous symbols (the others on discrete windows).
 CONTINUOUS = ("controls", "constraints", "lagrangian", "euler_lagrange")

@@ -4,7 +4,7 @@ numerically — what the check ``structure`` measures (:mod:`symvi.checks.struct
 
 :class:`StepMap` solves the step residual R(s, f_new) = 0 by Newton from the predictor,
 differentiates the step map Φ: s ↦ s' by the implicit function theorem (kernels evaluated
-with exact forward-mode Jacobians, :class:`_Numeric`), and builds the Hamiltonian
+with exact forward-mode Jacobians, :class:`~symvi.checks.tape.ForwardTape`), and builds the Hamiltonian
 coordinates y = Λ(s) and the Poisson tensor they carry; :func:`poisson_defect` and
 :func:`symplectic_defect` measure how far a map is from preserving a structure.
 
@@ -50,6 +50,7 @@ import sympy as sp
 
 from ..derive import DerivedModel
 from ..groupoids.base import Groupoid
+from .tape import ForwardTape
 
 #: Default time step of a :class:`StepMap`.
 STEP = 0.1
@@ -132,104 +133,6 @@ def symplectic_defect(M: np.ndarray, form: np.ndarray | None = None,
     return _defect(M.T @ W2 @ M - W, scale)
 
 
-# -- numerical kernels --------------------------------------------------------------------
-class _Numeric:
-    """A kernel output as a NumPy function of z: flattened value and total Jacobian dF/dz.
-
-    Forward-mode differentiation on a tape: every distinct subexpression of the kernel's
-    definitions (named base points) and outputs becomes one assignment of an operation to
-    its arguments, and its gradient row (a NumPy vector over z) follows by the chain rule
-    from the arguments' rows; one Python function is generated for the whole tape.
-    Differentiating the expanded expressions with SymPy instead takes seconds per kernel
-    on the action groupoids.
-    """
-
-    def __init__(self, kernel, output: str, fixed: dict):
-        F = dict(kernel.outputs)[output]
-        self.nz, self.size = len(kernel.z), F.shape[0] * F.shape[1]
-        self.fixed = np.array([float(v) for v in fixed.values()])
-        z = [sp.Symbol(f"z{j}") for j in range(self.nz)]
-        self._names = dict(zip(kernel.z, z)) | {
-            p: sp.Symbol(f"k{i}") for i, p in enumerate(fixed)}
-        self._lines: list[tuple[sp.Symbol, sp.Expr]] = []
-        self._memo: dict = {}
-        for symbol, e in kernel.definitions:
-            self._names[symbol] = self._visit(sp.sympify(e))
-        outputs = [self._visit(sp.sympify(e)) for e in F]
-        self.function = self._compile(z, len(fixed), outputs)
-
-    def _compile(self, z: list, nfixed: int, outputs: list):
-        """One Python function of (z, k) returning the outputs and their gradient rows."""
-        from sympy.printing.numpy import NumPyPrinter
-
-        printer = NumPyPrinter({"fully_qualified_modules": True,
-                                "allow_unknown_functions": True})
-        namespace = {"numpy": np, "E": np.eye(self.nz)}
-        rows = {v: f"E[{j}]" for j, v in enumerate(z)}
-        code = ["def evaluate(z, k):"]
-        code += [f"    {v} = z[{j}]" for j, v in enumerate(z)]
-        code += [f"    k{i} = k[{i}]" for i in range(nfixed)]
-
-        def atom(a) -> str:
-            return str(a) if a.is_Symbol else f"({printer.doprint(a)})"
-
-        for v, e in self._lines:
-            args = e.args
-            if e.is_Add:
-                code.append(f"    {v} = " + " + ".join(atom(a) for a in args))
-                partials = [(a, "1") for a in args]
-            elif e.is_Mul:
-                code.append(f"    {v} = " + "*".join(atom(a) for a in args))
-                partials = [(a, "*".join(atom(b) for j, b in enumerate(args) if j != i) or "1")
-                            for i, a in enumerate(args)]
-            else:
-                code.append(f"    {v} = {printer.doprint(e)}")
-                partials = [(a, printer.doprint(sp.diff(e, a))) for a in e.free_symbols]
-                for f in (e + sum(sp.diff(e, a) for a in e.free_symbols)).atoms(sp.Function):
-                    if getattr(f.func, "_imp_", None) is not None:
-                        namespace[f.func.__name__] = f.func._imp_
-            terms = [f"({g})*{rows[a]}" for a, g in partials if a in rows and g != "0"]
-            if terms:
-                rows[v] = f"d{v}"
-                code.append(f"    d{v} = " + " + ".join(terms))
-        zero = "numpy.zeros(%d)" % self.nz
-        code.append("    return ([%s], [%s])" % (
-            ", ".join(printer.doprint(o) for o in outputs),
-            ", ".join(rows.get(o, zero) for o in outputs)))
-        exec("\n".join(code), namespace)
-        return namespace["evaluate"]
-
-    def _visit(self, e):
-        if e in self._names:
-            return self._names[e]
-        if e.is_Atom:
-            if e.is_Symbol:
-                raise ValueError(f"kernel expression uses an unknown symbol {e}")
-            return e
-        if e in self._memo:
-            return self._memo[e]
-        args = [self._visit(a) for a in e.args]
-        flat = (e.func(*args, evaluate=False) if e.is_Add or e.is_Mul or e.is_Pow
-                else e.func(*args))
-        if flat.is_Atom:
-            return flat
-        v = sp.Symbol(f"v{len(self._lines)}")
-        self._lines.append((v, flat))
-        self._memo[e] = v
-        return v
-
-    def __call__(self, zv) -> tuple[np.ndarray, np.ndarray]:
-        values, rows = self.function(np.asarray(zv, dtype=float), self.fixed)
-        F = np.array([float(v) for v in values])
-        J = np.array([np.broadcast_to(np.asarray(r, dtype=float), (self.nz,)) for r in rows])
-        return F, J.reshape(self.size, self.nz)
-
-
-def factors(g: Groupoid) -> list[Groupoid]:
-    """The factors of a product groupoid; ``[g]`` for any other."""
-    return list(g.factors) if g.kind == "product" else [g]
-
-
 # -- the step map and its Hamiltonian coordinates -----------------------------------------
 class StepMap:
     """The step map of a derived model and its Hamiltonian coordinates, numerically.
@@ -258,12 +161,12 @@ class StepMap:
         self.r, self.m, self.n = derived.order, derived.source_dim, derived.fibre_dim
         values = dict(zip(derived.parameters, derived.defaults)) | dict(parameters or {})
         fixed = {p: values[p] for p in derived.parameters} | {derived.step: self.h}
-        self._residual = _Numeric(derived.kernel("step"), "residual", fixed)
-        self._predict = _Numeric(derived.kernel("predict"), "guess", fixed)
-        self._momentum = _Numeric(derived.kernel("momentum_minus"), "momentum", fixed)
-        self._target = _Numeric(derived.kernel("target"), "target", fixed)
-        self._right = _Numeric(derived.kernel("variations"), "right", fixed)
-        self._left = _Numeric(derived.kernel("variations"), "left", fixed)
+        self._residual = ForwardTape(derived.kernel("step"), "residual", fixed)
+        self._predict = ForwardTape(derived.kernel("predict"), "guess", fixed)
+        self._momentum = ForwardTape(derived.kernel("momentum_minus"), "momentum", fixed)
+        self._target = ForwardTape(derived.kernel("target"), "target", fixed)
+        self._right = ForwardTape(derived.kernel("variations"), "right", fixed)
+        self._left = ForwardTape(derived.kernel("variations"), "left", fixed)
         A = groupoid.algebroid()
         self._anchor = sp.lambdify([A.q], A.anchor, "numpy")
         self._structure = sp.lambdify([A.q], list(A.structure), "numpy")
@@ -361,9 +264,9 @@ class StepMap:
         """A moderate state: smooth node paths on pair factors, slowly varying ξ on groups."""
         elements, h = 2 * self.r - 1, self.h
         xs, fs = [], [[] for _ in range(elements)]
-        for factor in factors(self.groupoid):
+        for factor in self.groupoid.factors:
             k = factor.fibre_dim
-            if factor.kind == "pair":
+            if factor.elements_are_node_pairs:
                 c, v, a = rng.uniform(-0.7, 0.7, k), rng.uniform(-1, 1, k), rng.uniform(-1, 1, k)
                 nodes = [c + v * (j * h) + a * (j * h) ** 2 / 2 + 0.01 * rng.uniform(-1, 1, k)
                          for j in range(elements + 1)]

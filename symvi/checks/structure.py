@@ -50,7 +50,7 @@ import numpy as np
 
 from ..groupoids.base import Groupoid
 from .report import CheckResult
-from .stepmap import (STEP, Defect, StepMap, canonical_poisson, factors, linear_poisson,
+from .stepmap import (STEP, Defect, StepMap, canonical_poisson, linear_poisson,
                       poisson_defect, symplectic_defect)
 
 __all__ = ["NAME", "TOLERANCE", "STEP", "SAMPLES", "Defect", "StepMap", "canonical_poisson",
@@ -62,28 +62,11 @@ NAME = "structure"
 TOLERANCE = 1e-9
 #: Number of sample points.
 SAMPLES = 3
-_KINDS = ("pair", "lie", "action")
-
-
-def _kinds(g: Groupoid) -> set[str]:
-    """The kinds of ``g``'s factors, and ``"product"`` if it is one."""
-    return {f.kind for f in factors(g)} | ({"product"} if g.kind == "product" else set())
 
 
 def structure_name(groupoid: Groupoid, order: int) -> str:
     """The structure the step map of ``order`` on ``groupoid`` preserves, for messages."""
-    kinds = {f.kind for f in factors(groupoid)}
-    if order == 1:
-        if kinds == {"pair"}:
-            return "canonical symplectic form of T*Q, (q_k, p_k) ↦ (q_{k+1}, p_{k+1})"
-        if kinds == {"lie"}:
-            return "Lie–Poisson structure of 𝔤*, μ_k ↦ μ_{k+1}"
-        return "linear Poisson structure of A*G, (x_k, μ_k) ↦ (x_{k+1}, μ_{k+1})"
-    if kinds == {"pair"}:
-        return "canonical symplectic form of T*(Q×Q), (q_k, q_{k+1}, p_k, p_{k+1}) one node on"
-    if kinds == {"lie"}:
-        return "Poisson structure of A*(P^αG) = 𝔤* × T*G, (ν, w_k, p) one element on"
-    return "Poisson structure of A*(P^αG) = A*G × T*H, (x, ν, w_k, p) one element on"
+    return groupoid.preserved_structure(order)
 
 
 def sample_defects(step: StepMap, rng: np.random.Generator, samples: int = SAMPLES
@@ -112,11 +95,10 @@ def run(ctx) -> CheckResult:
         return CheckResult.skipped(
             NAME, "constrained (optimal-control) model: it is solved as a whole trajectory "
                   "with multipliers and has no step map whose Jacobian could be checked")
-    unknown = _kinds(g) - set(_KINDS) - {"product"}
-    if unknown:
+    if not g.structure_check:
         return CheckResult.skipped(
-            NAME, f"groupoid kind {sorted(unknown)} has no Poisson structure implemented "
-                  f"here (pair, Lie group, action groupoid and their products only)")
+            NAME, f"{g!r} has no Poisson structure implemented here (pair, Lie group, "
+                  f"action groupoid and their products only)")
     if dm.order not in (1, 2):
         return CheckResult.skipped(NAME, f"order {dm.order}: only orders 1 and 2 are covered")
     derived = ctx.derived

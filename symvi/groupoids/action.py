@@ -44,6 +44,9 @@ class ActionGroupoid(Groupoid):
 
     kind = "action"
     whole_trajectory = True
+    sampling_text = ("increments ξ_i = y(t + (i + ½)h), base points x_0 = q(t_0), "
+                     "x_{j+1} = β(x_j, ξ_j)")
+    structure_check = True
 
     def __init__(self, group: MatrixLieGroup, base: str | Sequence[str], action: Action,
                  label: str | None = None):
@@ -184,17 +187,16 @@ class ActionGroupoid(Groupoid):
     def step_scaled(self):
         return self.group.step_scaled()
 
-    def quadrature(self, rule, xs, fs, h):
-        """``lie``: trapezoid in the base, h/2 [l(q_0, ξ) + l(q_1, ξ)] (symmetric, order 2);
-        ``lie_midpoint``: the base point at the middle node of the two elements. A base
-        point after the last element, when given (``len(xs) > len(fs)``), is used as its
-        target instead of β(x, f), so that derivatives can go through it by the chain rule."""
-        algebra = self.group.algebra_point(fs, h)
-        if rule == "lie_midpoint":
-            return [(1, dict(zip(self.q, xs[1])) | algebra)]
-        q1 = xs[1] if len(xs) > len(fs) else self.target(xs[0], fs[0], h)
-        return [(sp.S.Half, dict(zip(self.q, xs[0])) | algebra),
-                (sp.S.Half, dict(zip(self.q, q1)) | algebra)]
+    def algebra_point(self, fs, h) -> dict:
+        """ξ (and ξ̇) of the group's rules, from the increments."""
+        return self.group.algebra_point(fs, h)
+
+    def matrix_groups(self):
+        return (self.group,)
+
+    def base_point(self, x) -> dict:
+        """The substitution of the base coordinates q by the point ``x``."""
+        return dict(zip(self.q, x))
 
     def discrete_symbols(self, order):
         return self.q + self.group.discrete_symbols(order)
@@ -214,6 +216,12 @@ class ActionGroupoid(Groupoid):
 
     def fingerprint(self) -> str:
         return f"action:{self.label}:{self.names}:{sp.srepr(self._phi)}:{self.group.fingerprint()}"
+
+    def fibre_sampling(self):
+        return (None,) * self.fibre_dim          # ξ at the element's middle
+
+    def equation_setting(self, order):
+        return "on the action algebroid"
 
     def c_context(self) -> dict:
         return {"configuration_dim": self.group.matrix_dim ** 2,

@@ -26,6 +26,7 @@ import numpy as np
 import sympy as sp
 
 from ..errors import ModelError
+from ..rules import RULES, Rule, rule_names
 
 
 def _shape(value, expected: tuple[int, ...], what: str) -> None:
@@ -105,18 +106,23 @@ class Groupoid(ABC):
         """The highest derivatives of an order-``order`` Lagrangian (Legendre condition)."""
 
     @abstractmethod
-    def rules(self, order: int) -> tuple[str, ...]:
-        """Names of the discretisations (:data:`symvi.discretise.RULES`) this groupoid
-        supports at ``order``; the first is the default."""
-
-    @abstractmethod
-    def quadrature(self, rule: str, xs, fs, h: sp.Expr) -> list[tuple[sp.Expr, dict]]:
-        """Weighted points of ``rule`` on a window of slots: L_d = h Σ w·L(point), each
-        point a substitution of :meth:`continuous_symbols` (DESIGN.md §3)."""
+    def rules(self, order: int) -> tuple[Rule, ...]:
+        """The discretisation rules (:mod:`symvi.rules`) that apply to this groupoid at
+        ``order``; the first is the default. Each owns its quadrature."""
 
     def default_discretisation(self, order: int) -> str:
         """Name of the rule used when a model names none."""
-        return self.rules(order)[0]
+        return self.rules(order)[0].name
+
+    def rule(self, name: str) -> Rule:
+        """The rule of this groupoid called ``name``; a ModelError for any other name."""
+        mine = {r.name: r for order in (1, 2) for r in self.rules(order)}
+        if name in mine:
+            return mine[name]
+        if name in RULES:
+            raise ModelError(f"discretisation {name!r} does not apply to {self!r}; its rules "
+                             f"are {sorted(mine)}")
+        raise ModelError(f"unknown discretisation {name!r}; known: {rule_names()}")
 
     def step_scaled(self) -> tuple[bool, ...]:
         """Per fibre coordinate: True when it is an increment divided by h (ξ = τ⁻¹(w)/h).
@@ -207,3 +213,53 @@ class Groupoid(ABC):
     #: the unknowns, moved by :meth:`move` and, on matrix-group factors, corrected
     #: multiplicatively.
     whole_trajectory: bool = False
+
+    # -- what the checks need to know (symvi.checks; no kind branches outside here) ------
+    #: Whether an element is the pair of its end nodes in Rⁿ (the pair groupoid): a path
+    #: is then its nodes, and its residual expands in them directly (E(L) in q, q̇, q̈).
+    elements_are_node_pairs: bool = False
+    #: How the consistency check samples an element along a smooth curve, in words.
+    sampling_text: str = "fibres sampled along a curve of the Lie algebroid"
+    #: Whether :mod:`symvi.checks.stepmap` knows the Poisson structure its step map
+    #: preserves (pair groupoid, Lie group, action groupoid and their products).
+    structure_check: bool = False
+
+    @property
+    def factors(self) -> tuple["Groupoid", ...]:
+        """The factors of a product groupoid; ``(self,)`` for any other."""
+        return (self,)
+
+    def matrix_groups(self) -> tuple:
+        """The matrix Lie groups of this groupoid (a Lie group, an action groupoid's
+        acting group, a product's): their Lie algebra bases must close."""
+        return ()
+
+    def fibre_sampling(self) -> tuple[int | None, ...]:
+        """How each fibre coordinate is sampled along a curve (consistency expansions):
+        the index of the base coordinate whose value at the element's target node it is
+        (a pair factor's fibre is the next node), or None for an increment sampled at the
+        middle of the element (ξ of a group factor)."""
+        raise NotImplementedError(f"consistency expansions do not know how to sample the "
+                                  f"fibre of {self!r} along a curve")
+
+    def component_names(self) -> tuple[str, ...]:
+        """Names of the residual's components (the fibre directions e_α): a pair factor's
+        coordinate names, a group factor's Lie algebra coordinates."""
+        algebroid = self.algebroid()
+        base = [str(s) for s in algebroid.q]
+        return tuple(base[i] if i is not None else str(y)
+                     for i, y in zip(self.fibre_sampling(), algebroid.y))
+
+    def equation_setting(self, order: int) -> str:
+        """Where the continuous Euler–Lagrange equations live, for messages."""
+        return "on the Lie algebroid"
+
+    def step_matrix_name(self, order: int) -> str:
+        """The matrix that defines the step map (regularity), for messages."""
+        return {1: "D₁₂L_d", 2: "D₁₃L_d"}[order] + " analogue"
+
+    def preserved_structure(self, order: int) -> str:
+        """The structure the step map of ``order`` preserves (paper §4.3), for messages."""
+        if order == 1:
+            return "linear Poisson structure of A*G, (x_k, μ_k) ↦ (x_{k+1}, μ_{k+1})"
+        return "Poisson structure of A*(P^αG) = A*G × T*H, (x, ν, w_k, p) one element on"

@@ -25,6 +25,7 @@ import numpy as np
 import sympy as sp
 
 from ..errors import ModelError
+from ..rules import LIE, LIE_MIDPOINT
 from . import analytic
 from . import retraction as _retraction
 from .base import Algebroid, Groupoid, _shape
@@ -60,6 +61,8 @@ class MatrixLieGroup(Groupoid):
 
     kind = "lie"
     whole_trajectory = True
+    sampling_text = "increments ξ_i = y(t + (i + ½)h) (element midpoints)"
+    structure_check = True
 
     def __init__(self, basis: Sequence, names=None, label: str = "G",
                  retraction: str = "cayley"):
@@ -223,7 +226,7 @@ class MatrixLieGroup(Groupoid):
         return self.xidot if order == 2 else self.xi
 
     def rules(self, order):
-        return ("lie_midpoint",) if order == 2 else ("lie",)
+        return (LIE_MIDPOINT,) if order == 2 else (LIE,)
 
     def step_scaled(self):
         return (True,) * self.fibre_dim
@@ -235,8 +238,12 @@ class MatrixLieGroup(Groupoid):
         x0, x1 = sp.Matrix(fs[0]), sp.Matrix(fs[1])
         return dict(zip(self.xi, (x0 + x1) / 2)) | dict(zip(self.xidot, (x1 - x0) / h))
 
-    def quadrature(self, rule, xs, fs, h):
-        return [(1, self.algebra_point(fs, h))]
+    def matrix_groups(self):
+        return (self,)
+
+    def base_point(self, x) -> dict:
+        """A Lie group has no base coordinates."""
+        return {}
 
     def discrete_symbols(self, order):
         return tuple(sp.Symbol(f"{n}_{k}", real=True) for k in range(order) for n in self.names)
@@ -253,6 +260,17 @@ class MatrixLieGroup(Groupoid):
     def fingerprint(self) -> str:
         return (f"lie:{self.label}:{self.retraction.name}:{[E.tolist() for E in self.basis]}:"
                 f"{self.names}")
+
+    def fibre_sampling(self):
+        return (None,) * self.fibre_dim          # ξ at the element's middle
+
+    def equation_setting(self, order):
+        return "Euler–Poincaré" if order == 1 else "second-order Euler–Poincaré"
+
+    def preserved_structure(self, order):
+        if order == 1:
+            return "Lie–Poisson structure of 𝔤*, μ_k ↦ μ_{k+1}"
+        return "Poisson structure of A*(P^αG) = 𝔤* × T*G, (ν, w_k, p) one element on"
 
     def group_context(self, offset: int = 0) -> dict:
         """One matrix-group factor for ``templates/group.c.j2``; ξ starts at f[offset]."""

@@ -6,6 +6,7 @@ from typing import Sequence
 import sympy as sp
 
 from ..errors import ModelError
+from ..rules import MIDPOINT, THREE_POINT, TRAPEZOID
 from .base import Algebroid, Groupoid, _shape
 
 
@@ -42,6 +43,9 @@ class PairGroupoid(Groupoid):
 
     kind = "pair"
     whole_trajectory = True
+    elements_are_node_pairs = True
+    sampling_text = "nodes q_j = q(t + jh)"
+    structure_check = True
 
     def __init__(self, coordinates: str | Sequence[str]):
         self.names = _names(coordinates)
@@ -76,23 +80,12 @@ class PairGroupoid(Groupoid):
         return self.qddot if order == 2 else self.qdot
 
     def rules(self, order):
-        return ("three_point",) if order == 2 else ("midpoint", "trapezoid")
+        return (THREE_POINT,) if order == 2 else (MIDPOINT, TRAPEZOID)
 
-    def _point(self, q, v, a=None) -> dict:
+    def point(self, q, v, a=None) -> dict:
+        """The substitution q, q̇ (, q̈) → the given values: a quadrature point."""
         point = dict(zip(self.q, q)) | dict(zip(self.qdot, v))
         return point | dict(zip(self.qddot, a)) if a is not None else point
-
-    def quadrature(self, rule, xs, fs, h):
-        nodes = [sp.Matrix(n) for n in self.window_nodes(xs, fs)]
-        if rule == "three_point":
-            q0, q1, q2 = nodes
-            return [(1, self._point((q0 + q1 + q2) / 3, (q2 - q0) / (2 * h),
-                                    (q2 - 2 * q1 + q0) / h**2))]
-        q0, q1 = nodes
-        v = (q1 - q0) / h
-        if rule == "trapezoid":
-            return [(sp.S.Half, self._point(q0, v)), (sp.S.Half, self._point(q1, v))]
-        return [(1, self._point((q0 + q1) / 2, v))]
 
     def discrete_symbols(self, order):
         return tuple(s for node in self.nodes(order + 1) for s in node)
@@ -150,3 +143,20 @@ class PairGroupoid(Groupoid):
 
     def fingerprint(self) -> str:
         return f"pair:{','.join(self.names)}"
+
+    def fibre_sampling(self):
+        return tuple(range(self.fibre_dim))     # f is the target node q_{k+1}
+
+    def component_names(self):
+        return self.names
+
+    def equation_setting(self, order):
+        return "on TQ"
+
+    def step_matrix_name(self, order):
+        return {1: "D₁₂L_d", 2: "D₁₃L_d"}[order]
+
+    def preserved_structure(self, order):
+        if order == 1:
+            return "canonical symplectic form of T*Q, (q_k, p_k) ↦ (q_{k+1}, p_{k+1})"
+        return "canonical symplectic form of T*(Q×Q), (q_k, q_{k+1}, p_k, p_{k+1}) one node on"

@@ -11,6 +11,7 @@ import itertools
 import sympy as sp
 
 from ..errors import ModelError
+from ..rules import PRODUCT, PRODUCT2
 from .base import Algebroid, Groupoid, _shape, block_algebroid
 
 
@@ -18,11 +19,12 @@ class ProductGroupoid(Groupoid):
     """The product of groupoids; the discretisation is each factor's default, combined."""
 
     kind = "product"
+    sampling_text = "pair factors at nodes, group factors at element midpoints, base points from β"
 
     def __init__(self, *factors: Groupoid):
         if len(factors) < 2 or not all(isinstance(f, Groupoid) for f in factors):
             raise ModelError("ProductGroupoid needs two or more symvi groupoids")
-        self.factors = tuple(factors)
+        self._factors = tuple(factors)
         symbols = [s for f in factors for s in f.continuous_symbols(2)]
         repeated = sorted({str(s) for s in symbols if symbols.count(s) > 1})
         if repeated:
@@ -40,8 +42,8 @@ class ProductGroupoid(Groupoid):
             out.append(values[offset:offset + size])
         return out
 
-    def _factor_slots(self, xs, fs):
-        """Per factor: its sources and fibres of every slot."""
+    def factor_slots(self, xs, fs):
+        """Per factor: its sources and fibres of every slot (the product rules)."""
         xs = [self._split(x, self._m) for x in xs]
         fs = [self._split(f, self._n) for f in fs]
         return [([x[i] for x in xs], [f[i] for f in fs]) for i in range(len(self.factors))]
@@ -104,8 +106,34 @@ class ProductGroupoid(Groupoid):
         return self._blocks("left", x, f, h)
 
     @property
+    def factors(self) -> tuple[Groupoid, ...]:
+        return self._factors
+
+    @property
     def whole_trajectory(self) -> bool:
         return all(f.whole_trajectory for f in self.factors)
+
+    @property
+    def structure_check(self) -> bool:
+        return all(f.structure_check for f in self.factors)
+
+    def matrix_groups(self):
+        return tuple(G for f in self.factors for G in f.matrix_groups())
+
+    def fibre_sampling(self):
+        out, offset = [], 0
+        for factor in self.factors:
+            out += [i if i is None else i + offset for i in factor.fibre_sampling()]
+            offset += factor.source_dim
+        return tuple(out)
+
+    def equation_setting(self, order):
+        return "on the product algebroid"
+
+    def preserved_structure(self, order):
+        # one structure when the factors agree (products of pair groupoids are symplectic)
+        texts = {f.preserved_structure(order) for f in self.factors}
+        return texts.pop() if len(texts) == 1 else super().preserved_structure(order)
 
     def algebroid(self) -> Algebroid:
         return block_algebroid([f.algebroid() for f in self.factors])
@@ -116,7 +144,7 @@ class ProductGroupoid(Groupoid):
                      for v in factor.move(xi, ei))
 
     def predictor(self, xs, fs):
-        return tuple(v for factor, (fx, ff) in zip(self.factors, self._factor_slots(xs, fs))
+        return tuple(v for factor, (fx, ff) in zip(self.factors, self.factor_slots(xs, fs))
                      for v in factor.predictor(fx, ff))
 
     def continuous_symbols(self, order):
@@ -126,31 +154,17 @@ class ProductGroupoid(Groupoid):
         return tuple(s for f in self.factors for s in f.leading_symbols(order))
 
     def rules(self, order):
-        return ("product2",) if order == 2 else ("product",)
+        return (PRODUCT2,) if order == 2 else (PRODUCT,)
 
     def step_scaled(self):
         return tuple(s for f in self.factors for s in f.step_scaled())
-
-    def quadrature(self, rule, xs, fs, h):
-        """Tensor product of the factors' default quadratures of the rule's order."""
-        order = 2 if rule == "product2" else 1
-        per_factor = [factor.quadrature(factor.default_discretisation(order), fx, ff, h)
-                      for factor, (fx, ff) in zip(self.factors, self._factor_slots(xs, fs))]
-        points = []
-        for combination in itertools.product(*per_factor):
-            weight = sp.Mul(*[w for w, _ in combination])
-            point = {}
-            for _, p in combination:
-                point |= p
-            points.append((weight, point))
-        return points
 
     def discrete_symbols(self, order):
         return tuple(s for f in self.factors for s in f.discrete_symbols(order))
 
     def discrete_mapping(self, order, xs, fs):
         mapping = {}
-        for factor, (fx, ff) in zip(self.factors, self._factor_slots(xs, fs)):
+        for factor, (fx, ff) in zip(self.factors, self.factor_slots(xs, fs)):
             mapping |= factor.discrete_mapping(order, fx, ff)
         return mapping
 

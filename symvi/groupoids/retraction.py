@@ -15,15 +15,25 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from typing import TYPE_CHECKING, Sequence
+from typing import Any, Protocol, Sequence
 
 import sympy as sp
 
 from ..errors import ModelError
 from . import analytic
 
-if TYPE_CHECKING:
-    from .lie import MatrixLieGroup
+
+
+class Group(Protocol):
+    """What a retraction uses of its matrix Lie group (:class:`~.lie.MatrixLieGroup`)."""
+
+    label: str
+    matrix_dim: int
+    minimal_structure: Any
+
+    def hat(self, x: Sequence[sp.Expr]) -> sp.Matrix: ...
+
+    def ad(self, x: Sequence[sp.Expr]) -> sp.Matrix: ...
 
 
 class Retraction(ABC):
@@ -31,7 +41,7 @@ class Retraction(ABC):
 
     name: str = "abstract"
 
-    def __init__(self, group: "MatrixLieGroup"):
+    def __init__(self, group: Group):
         self.group = group
 
     @abstractmethod
@@ -83,7 +93,7 @@ class Exponential(Retraction):
 
     name = "exp"
 
-    def __init__(self, group: "MatrixLieGroup"):
+    def __init__(self, group: Group):
         super().__init__(group)
         structure = group.minimal_structure
         if structure is None:
@@ -116,7 +126,7 @@ class Exponential(Retraction):
 RETRACTIONS = {"cayley": Cayley, "exp": Exponential}
 
 
-def make(name: str, group: "MatrixLieGroup") -> Retraction:
+def make(name: str, group: Group) -> Retraction:
     """The retraction called ``name`` ("cayley" or "exp") of ``group``."""
     if name not in RETRACTIONS:
         raise ModelError(f"unknown retraction {name!r}; known: {sorted(RETRACTIONS)}")

@@ -1,0 +1,128 @@
+"""Discretisation rules: each owns its quadrature and its order of consistency (DESIGN.md §3).
+
+A rule turns a continuous Lagrangian into L_d = h Σ w_i L(point_i) on a window of ``order``
+slots (x_j, f_j), each point a substitution of the groupoid's continuous symbols. The
+quadrature reads the window through the groupoid's own coordinates — the nodes of a pair
+groupoid (``window_nodes``, ``point``), the Lie algebra point and base points of a group
+or action groupoid (``algebra_point``, ``base_point``), a product's factors
+(``factor_slots``) — so a rule applies to the groupoids that give them, and each groupoid
+lists its rules (:meth:`~symvi.groupoids.base.Groupoid.rules`; the first is the default).
+"""
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field
+from typing import Any, Callable, Sequence
+
+import sympy as sp
+
+Points = list[tuple[sp.Expr, dict]]
+#: (groupoid, xs, fs, h) → weighted points. The groupoid is typed loosely: it is whichever
+#: groupoid lists the rule, and this module must not import the groupoids (they import it).
+Quadrature = Callable[[Any, Sequence, Sequence, sp.Expr], Points]
+
+
+@dataclass(frozen=True)
+class Rule:
+    """A named discretisation of a given order.
+
+    ``consistency_order`` is p in R = ±h·E + O(h^{p+1}) for the discrete Euler–Lagrange
+    residual R against the continuous equations E (2 for the symmetric rules here): the
+    ``consistency`` check fails a residual that falls short of it.
+    """
+
+    name: str
+    order: int
+    summary: str
+    quadrature: Quadrature = field(repr=False, compare=False)
+    consistency_order: int = 2
+
+    def applies_to(self, groupoid: Any) -> bool:
+        return self in groupoid.rules(self.order)
+
+    def build(self, groupoid: Any, L: sp.Expr, xs, fs, step: sp.Expr) -> sp.Expr:
+        """L_d = h Σ w_i L(point_i) on the window (xs, fs)."""
+        return step * self.average(groupoid, L, xs, fs, step)
+
+    def average(self, groupoid: Any, F: sp.Expr, xs, fs, step: sp.Expr) -> sp.Expr:
+        """Σ w_i F(point_i): the quadrature's weighted mean of F over one window."""
+        return sum(w * F.xreplace(point) for w, point in self.quadrature(groupoid, xs, fs, step))
+
+
+# -- pair groupoid: the nodes q_0, q_1, … of the window ----------------------------------
+def _nodes(g, xs, fs) -> list[sp.Matrix]:
+    return [sp.Matrix(n) for n in g.window_nodes(xs, fs)]
+
+
+def _midpoint(g, xs, fs, h) -> Points:
+    q0, q1 = _nodes(g, xs, fs)
+    return [(sp.Integer(1), g.point((q0 + q1) / 2, (q1 - q0) / h))]
+
+
+def _trapezoid(g, xs, fs, h) -> Points:
+    q0, q1 = _nodes(g, xs, fs)
+    v = (q1 - q0) / h
+    return [(sp.S.Half, g.point(q0, v)), (sp.S.Half, g.point(q1, v))]
+
+
+def _three_point(g, xs, fs, h) -> Points:
+    q0, q1, q2 = _nodes(g, xs, fs)
+    return [(sp.Integer(1), g.point((q0 + q1 + q2) / 3, (q2 - q0) / (2 * h),
+                                    (q2 - 2 * q1 + q0) / h**2))]
+
+
+# -- Lie groups and action groupoids: ξ (and ξ̇) from the increments ---------------------
+def _lie(g, xs, fs, h) -> Points:
+    """h l(ξ) on a Lie group; on an action groupoid the trapezoid in the base,
+    h/2 [l(q_0, ξ) + l(q_1, ξ)] (symmetric, order 2). A base point after the element, when
+    given (``len(xs) > len(fs)``), is its target instead of β(x, f), so that derivatives
+    can go through it by the chain rule."""
+    algebra = g.algebra_point(fs, h)
+    if not g.source_dim:                 # a Lie group has no base to average over
+        return [(sp.Integer(1), algebra)]
+    q1 = xs[1] if len(xs) > len(fs) else g.target(xs[0], fs[0], h)
+    return [(sp.S.Half, g.base_point(xs[0]) | algebra), (sp.S.Half, g.base_point(q1) | algebra)]
+
+
+def _lie_midpoint(g, xs, fs, h) -> Points:
+    """L((ξ_0 + ξ_1)/2, (ξ_1 − ξ_0)/h) (paper eq. ``sdfinal``), on an action groupoid at
+    the base point of the middle node."""
+    return [(sp.Integer(1), g.base_point(xs[1]) | g.algebra_point(fs, h))]
+
+
+# -- products: the tensor product of the factors' default rules ------------------------
+def _product(g, xs, fs, h) -> Points:
+    order = len(fs)
+    per_factor = [factor.rules(order)[0].quadrature(factor, fx, ff, h)
+                  for factor, (fx, ff) in zip(g.factors, g.factor_slots(xs, fs))]
+    points = []
+    for combination in itertools.product(*per_factor):
+        point: dict = {}
+        for _, p in combination:
+            point |= p
+        points.append((sp.Mul(*[w for w, _ in combination]), point))
+    return points
+
+
+MIDPOINT = Rule("midpoint", 1, "pair: L_d(q0, q1) = h L((q0+q1)/2, (q1-q0)/h)", _midpoint)
+TRAPEZOID = Rule("trapezoid", 1,
+                 "pair: L_d(q0, q1) = h/2 [L(q0, (q1-q0)/h) + L(q1, (q1-q0)/h)]", _trapezoid)
+THREE_POINT = Rule("three_point", 2, "pair: L_d(q0, q1, q2) = h L((q0+q1+q2)/3, (q2-q0)/2h, "
+                                     "(q2-2q1+q0)/h^2)", _three_point)
+LIE = Rule("lie", 1, "Lie group: L_d(w) = h l(xi), xi = tau^-1(w)/h; action groupoid: "
+                     "h/2 [l(q0, xi) + l(q1, xi)]", _lie)
+LIE_MIDPOINT = Rule("lie_midpoint", 2, "Lie group: L_d(w0, w1) = h L((xi0+xi1)/2, "
+                                       "(xi1-xi0)/h) (paper eq. sdfinal); action groupoid: "
+                                       "the base point at the middle node", _lie_midpoint)
+PRODUCT = Rule("product", 1, "product groupoid: each factor's first-order default, tensor "
+                             "product", _product)
+PRODUCT2 = Rule("product2", 2, "product groupoid: each factor's second-order default, "
+                               "tensor product", _product)
+
+#: Every rule, by name.
+RULES: dict[str, Rule] = {r.name: r for r in (MIDPOINT, TRAPEZOID, THREE_POINT, LIE,
+                                              LIE_MIDPOINT, PRODUCT, PRODUCT2)}
+
+
+def rule_names() -> list[str]:
+    return sorted(RULES)
