@@ -37,7 +37,7 @@ from scipy.optimize import root  # noqa: E402
 from bench_step import BASELINE_REPEATS, BASELINE_STEPS, C_REPEATS, C_STEPS  # noqa: E402
 from bench_step import RESIDUAL_OK, best_time, lambdified_step, report  # noqa: E402
 from symvi.build import compile_model  # noqa: E402
-from symvi.model import Model  # noqa: E402
+from symvi.declaration.model import Model  # noqa: E402
 from symvi.models import get  # noqa: E402
 
 MODEL = "rigid_body"

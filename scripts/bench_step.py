@@ -42,9 +42,9 @@ except ImportError:
     sys.path.insert(0, str(Path(__file__).resolve().parent.parent))
 
 from symvi.build import compile_model  # noqa: E402
-from symvi.derive import derive  # noqa: E402
-from symvi.discretise import discretise  # noqa: E402
-from symvi.model import Model  # noqa: E402
+from symvi.derivation.derive import derive  # noqa: E402
+from symvi.discretisation.discretise import discretise  # noqa: E402
+from symvi.declaration.model import Model  # noqa: E402
 from symvi.models import get  # noqa: E402
 
 MODELS = ("pendulum", "double_pendulum")

@@ -10,9 +10,9 @@ from .errors import (BuildError, CacheWarning, CompilerNotFoundError,  # noqa: E
                      DamagedPackageError, ModelError, SymviError)
 from .groupoids import (SE2, SE3, SO3, ActionGroupoid, Groupoid, MatrixLieGroup,  # noqa: E402
                         PairGroupoid, ProductGroupoid)
-from .model import Example, Model, h  # noqa: E402
-from .symmetry import Symmetry  # noqa: E402
-from .control import euler_lagrange_operator, optimal_control  # noqa: E402
+from .declaration.model import Example, Model, h  # noqa: E402
+from .declaration.symmetry import Symmetry  # noqa: E402
+from .declaration.control import euler_lagrange_operator, optimal_control  # noqa: E402
 from .build import compile_model, load  # noqa: E402
 
 

@@ -8,11 +8,14 @@ import os
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
+from concurrent.futures import ThreadPoolExecutor  # noqa: E402
+
 import pytest  # noqa: E402
 
+import symvi.derivation.derive  # noqa: E402
 from symvi.build import compile_model  # noqa: E402
-from symvi.derive import derive  # noqa: E402
-from symvi.discretise import discretise  # noqa: E402
+from symvi.derivation.derive import derive  # noqa: E402
+from symvi.discretisation.discretise import discretise  # noqa: E402
 from symvi.models import BUNDLED, CONTROL, get  # noqa: E402
 
 FIRST_ORDER = ("harmonic_oscillator", "pendulum", "double_pendulum")
@@ -26,6 +29,15 @@ ACTION = ("heavy_top", "heavy_top_exp", "spherical_pendulum", "spherical_pendulu
           "se3_body", "se3_body_exp")
 #: Bundled optimal-control problems (constrained second-order models, whole trajectories).
 assert set(PAIR + LIE + ACTION + CONTROL) == set(BUNDLED)
+#: Bundled models whose derivation takes longest (seconds of CPU: SE(3) ≈ 20–30, heavy top
+#: ≈ 8, the rest ≤ 5): prebuilt first, so that the pool's threads finish together.
+COSTLIEST = ("se3_body_exp", "se3_body", "heavy_top_exp", "heavy_top",
+             "heavy_top_rotors_oc_variational", "double_pendulum_oc", "heavy_top_rotors_oc",
+             "spherical_pendulum_exp", "spherical_pendulum", "heavy_top_rotors_oc_exp")
+
+# Every derivation of the session stays in the process's memo (the library keeps the last
+# 32): the checks, the kernels-versus-SymPy tests and the builds share them.
+symvi.derivation.derive.MEMO_SIZE = 1024
 
 
 @pytest.fixture(scope="session")
@@ -33,8 +45,35 @@ def build_dir(tmp_path_factory):
     return tmp_path_factory.mktemp("generated")
 
 
+def _bundled_models_used(session) -> list[str]:
+    """The bundled models that the collected tests name in their parameters."""
+    used = {value for item in session.items for value in
+            getattr(getattr(item, "callspec", None), "params", {}).values()
+            if isinstance(value, str) and value in BUNDLED}
+    return sorted(used, key=lambda n: (COSTLIEST.index(n) if n in COSTLIEST else len(COSTLIEST), n))
+
+
 @pytest.fixture(scope="session")
-def compiled(build_dir):
+def prebuilt(request, build_dir) -> None:
+    """Compile, once per run, every bundled model the collected tests name, in threads.
+
+    Derivation holds the GIL but the C compile runs in a child process, so one thread
+    derives while others compile: the two cores stay busy, and every derivation lands in
+    this process's memo for the tests that need the symbolic kernels. A model that fails
+    here is compiled again, and its error raised, when a test asks for it.
+    """
+    def build(name: str) -> None:
+        try:
+            compile_model(get(name), build_dir)
+        except Exception:       # reported by the test that uses the model
+            pass
+
+    with ThreadPoolExecutor(max_workers=(os.cpu_count() or 1) + 1) as pool:
+        list(pool.map(build, _bundled_models_used(request.session)))
+
+
+@pytest.fixture(scope="session")
+def compiled(build_dir, prebuilt):
     """compiled(name) -> the generated module of bundled model ``name`` (cached)."""
     cache = {}
 
@@ -46,7 +85,7 @@ def compiled(build_dir):
 
 
 @pytest.fixture(scope="session")
-def derived():
+def derived(prebuilt):
     """derived(name) -> the DerivedModel (symbolic kernels) of a bundled model (cached)."""
     cache = {}
 

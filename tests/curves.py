@@ -1,10 +1,10 @@
 """Smooth curves for the consistency tests: functions of the time t of
-:mod:`symvi.consistency`, their derivatives, and a model's parameters by name."""
+:mod:`symvi.checks.expansions`, their derivatives, and a model's parameters by name."""
 from __future__ import annotations
 
 import sympy as sp
 
-from symvi.consistency import TIME
+from symvi.checks.expansions import TIME
 
 
 def curve(name: str) -> sp.Expr:

@@ -39,12 +39,7 @@ is four orders above; the negative control gives ≥ 1e-4 (measured 1.3e-4 heavy
 from __future__ import annotations
 
 import math
-import os
-import subprocess
-import sys
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 import pytest
@@ -55,7 +50,6 @@ from scipy.spatial.transform import Rotation
 
 from conftest import ACTION, LIE
 from group_oracle import Algebra, assert_stationary, oracle
-import symvi
 from symvi import (SO3, ActionGroupoid, Model, ModelError, PairGroupoid,
                    ProductGroupoid)
 from symvi.build import compile_model
@@ -64,43 +58,6 @@ from so3 import hat
 
 U = np.finfo(float).eps
 E3 = np.array([0.0, 0.0, 1.0])
-
-
-# ---------------------------------------------------------------------------------------
-# Build the bundled models of this module in parallel first
-# ---------------------------------------------------------------------------------------
-#: Costliest first (symbolic derivation dominates: SE(3) with exp ≈ 24 s, heavy top ≈ 8 s,
-#: Lie-group models ≈ 2 s of CPU each).
-PREBUILD = ("se3_body_exp", "se3_body", "heavy_top_exp", "heavy_top", "spherical_pendulum_exp",
-            "spherical_pendulum") + tuple(sorted(LIE, key=lambda n: not n.endswith("_exp")))
-
-
-@pytest.fixture(scope="module")
-def prebuilt(build_dir):
-    """Run ``symvi compile`` for the models of this module in parallel processes, into the
-    session's build directory, before the tests ask the ``compiled`` fixture for them.
-
-    SymPy's derivation is single-threaded and is most of this module's time; compile_model
-    caches by content hash under a per-model lock, so the fixture then only imports the
-    packages (and rebuilds, reporting any error itself, if a prebuild failed).
-    """
-    root = Path(symvi.__file__).resolve().parents[1]
-    env = dict(os.environ, PYTHONPATH=os.pathsep.join(
-        [str(root)] + [p for p in os.environ.get("PYTHONPATH", "").split(os.pathsep) if p]))
-
-    def build(name):
-        return subprocess.run([sys.executable, "-m", "symvi.cli", "compile", name, "-o",
-                               str(build_dir)], env=env, capture_output=True).returncode
-
-    with ThreadPoolExecutor(max_workers=max(1, min(len(PREBUILD), os.cpu_count() or 1))) as pool:
-        list(pool.map(build, PREBUILD))
-
-
-@pytest.fixture(scope="module")
-def compiled(compiled, prebuilt):
-    """The session's ``compiled`` (conftest), once the parallel prebuild has run; tests that
-    compile nothing (errors, the rotor) do not wait for it."""
-    return compiled
 
 
 # ---------------------------------------------------------------------------------------

@@ -26,7 +26,7 @@ import pytest
 
 import symvi.build
 import symvi.build.swap
-import symvi.emit
+import symvi.codegen.emit
 from symvi.build import cache_key
 from symvi.build.cache import (SYMVI, _closure, _file_digest, _generates,
                                _import_statements, _read_once, generating_sources,
@@ -46,7 +46,8 @@ def relative(paths) -> set[str]:
 # -- what the key hashes -------------------------------------------------------------------
 def test_closure_holds_the_generating_modules_and_no_others():
     sources = relative(generating_sources([type(tiny()).__module__]))
-    assert {"derive.py", "discretise.py", "emit.py", "model.py", "groupoids/lie.py",
+    assert {"derivation/derive.py", "discretisation/discretise.py", "codegen/emit.py",
+            "declaration/model.py", "discretisation/rules.py", "groupoids/lie.py",
             "groupoids/analytic.py", "build/package.py", "build/ccompile.py",
             "build/_cffi_build.py"} <= sources, sources
     assert not [s for s in sources if s.startswith(("checks/", "models/"))], sources
@@ -61,7 +62,7 @@ def test_closure_reaches_what_the_build_calls():
     used = symvi.build._build.__code__.co_names + symvi.build._compile.__code__.co_names
     modules = {getattr(symvi.build.__dict__.get(name), "__module__", None) for name in used}
     generating = {m for m in modules if m and m.startswith("symvi") and _generates(m)}
-    assert {"symvi.discretise", "symvi.derive", "symvi.emit", "symvi.build.package",
+    assert {"symvi.discretisation.discretise", "symvi.derivation.derive", "symvi.codegen.emit", "symvi.build.package",
             "symvi.build.ccompile"} <= generating
     for module in generating:
         spec = importlib.util.find_spec(module)
@@ -178,8 +179,15 @@ def symvi_copy(tmp_path) -> Path:
     src = tmp_path / "src"
     ignore = shutil.ignore_patterns("__pycache__")
     shutil.copytree(SYMVI, src / "symvi", ignore=ignore)
-    shutil.copytree(symvi.emit.template_dir(), src / "templates", ignore=ignore)
+    if not (src / "symvi" / "templates").is_dir():    # a checkout, not an installed copy
+        shutil.copytree(symvi.codegen.emit.template_dir(), src / "templates", ignore=ignore)
     return src
+
+
+def copied_template(src: Path, name: str) -> Path:
+    """The copy's template ``name``: inside the package when installed, else beside it."""
+    installed = src / "symvi" / "templates" / name
+    return installed if installed.exists() else src / "templates" / name
 
 
 @pytest.fixture
@@ -215,11 +223,11 @@ def test_editing_code_that_does_not_generate_reuses_the_build(symvi_copy, compil
     for edited in ("symvi/checks/report.py", "symvi/cli.py"):
         append(symvi_copy / edited, "\n# edited: the build must be reused\n")
         assert compile_copy() == built, edited       # same folder, key, extension file
-    append(symvi_copy / "templates" / "module.c.j2", "{# edited: rebuild #}\n")
+    append(copied_template(symvi_copy, "module.c.j2"), "{# edited: rebuild #}\n")
     after_template = compile_copy()
     assert after_template["key"] != built["key"]
     assert after_template["folder"] != built["folder"]
-    append(symvi_copy / "symvi" / "derive.py", "\n# edited: rebuild\n")
+    append(symvi_copy / "symvi" / "derivation" / "derive.py", "\n# edited: rebuild\n")
     after_derive = compile_copy()
     assert after_derive["key"] != after_template["key"]
     assert after_derive["folder"] != after_template["folder"]

@@ -11,10 +11,10 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from symvi.derive import _Engine, _stencil
-from symvi.discretise import discretise
+from symvi.derivation.derive import _Engine, _stencil
+from symvi.discretisation.discretise import discretise
 from symvi.models import get
-from symvi.rank import sequential_lambdify
+from symvi.declaration.rank import sequential_lambdify
 
 
 @pytest.mark.parametrize("name", ["heavy_top", "spherical_pendulum_exp"])

@@ -8,7 +8,7 @@ the action: E(L) = ∂L/∂q − d/dt ∂L/∂q̇ (+ d²/dt² ∂L/∂q̈) on th
 on an algebroid (EL₁ of Appendix C.2; EL₂ with P = ∂L̃/∂y − d/dt ∂L̃/∂ẏ), E(L̃ + λ_A Φ^A)
 for constrained models, whose discrete constraints give h·Φ + O(h³).
 
-1. The continuous operators: EL₁ agrees with symvi.control.euler_lagrange_operator; EL₂ is
+1. The continuous operators: EL₁ agrees with symvi.declaration.control.euler_lagrange_operator; EL₂ is
    −E(L) on TQ and −(d/dt + Ω×)(u̇ + Df(Ω)ᵀu) on so(3) (ERRATA.md, "Agree"); hand-written
    rigid body and heavy top equations.
 2. The expansion against the residual evaluated in exact / 60-digit arithmetic at two
@@ -32,14 +32,14 @@ from conftest import BUNDLED
 from symvi import (SO3, ActionGroupoid, Groupoid, MatrixLieGroup, Model, PairGroupoid,
                    ProductGroupoid, h)
 from symvi.checks import Context, check, run_check
-from symvi.consistency import (TIME, check_consistency, constraint_expansion, euler_lagrange,
+from symvi.checks.expansions import (TIME, check_consistency, constraint_expansion, euler_lagrange,
                                euler_lagrange_algebroid, expand_stencil, residual_expansion,
                                sample_stencil)
-from symvi.control import euler_lagrange_operator
-from symvi.derive import derive
-from symvi.discretise import discretise
+from symvi.declaration.control import euler_lagrange_operator
+from symvi.derivation.derive import derive
+from symvi.discretisation.discretise import discretise
 from symvi.models import get
-from symvi.rules import Rule
+from symvi.discretisation.rules import Rule
 
 t = TIME
 
@@ -54,7 +54,7 @@ def _equal(a, b):
 
 def _to_symbols(expr, groupoid):
     """Functions of t → the algebroid's symbols (q, y, ẏ): the form of
-    :func:`symvi.control.euler_lagrange_operator`."""
+    :func:`symvi.declaration.control.euler_lagrange_operator`."""
     a = groupoid.algebroid()
     mapping = {}
     for q, y, v in zip(a.q, a.y, a.ydot):  # pair-type blocks: y = q̇
@@ -239,8 +239,8 @@ STEP_ONLY = {"se3_body", "se3_body_exp"}
 
 def _step_only(model):
     """A stand-in for derive(discretise(model)) holding the step kernel's residual only
-    (unconstrained models), built with the engine of symvi.derive."""
-    from symvi.derive import Kernel, _Engine, _stencil
+    (unconstrained models), built with the engine of symvi.derivation.derive."""
+    from symvi.derivation.derive import Kernel, _Engine, _stencil
     dm = discretise(model)
     full = _stencil(dm, 2 * dm.order)
     residual = _Engine(dm).variation(full, dm.order, range(dm.order + 1))

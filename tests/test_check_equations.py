@@ -15,7 +15,7 @@ import sympy as sp
 from symvi.checks import check
 from symvi.checks.equations import HandDerived, compare
 from symvi.cli import main
-from symvi.discretise import h
+from symvi.discretisation.discretise import h
 from symvi.fixtures import paper_heavy_top_rotors as HEAVY
 from symvi.fixtures import paper_rigid_body as RIGID
 from symvi.models import get

@@ -15,7 +15,7 @@ import sympy as sp
 from symvi.checks.equations import HandDerived, compare
 from symvi.fixtures import paper_heavy_top_rotors as HEAVY
 from symvi.fixtures import paper_rigid_body as RIGID
-from symvi.jets import continuous_equations, derivative_name
+from symvi.checks.jets import continuous_equations, derivative_name
 from symvi.models import get
 
 t = sp.Symbol("t")

@@ -83,7 +83,7 @@ import pytest
 import sympy as sp
 
 from conftest import BUNDLED
-from symvi.emit import ArrayPrinter
+from symvi.codegen.emit import ArrayPrinter
 from symvi.groupoids import analytic
 from symvi.groupoids.analytic import SWITCH, THETA, AnalyticCoefficient
 from symvi.models import get

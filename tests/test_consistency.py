@@ -1,4 +1,4 @@
-"""Consistency of the discrete Euler–Lagrange residuals (DESIGN.md §5, symvi.consistency).
+"""Consistency of the discrete Euler–Lagrange residuals (DESIGN.md §5, symvi.checks.expansions).
 
 Sampling a smooth curve, q_{j+i} = q(t + i h), the residual of every bundled model expands
 as R = h·E(L) + h³·c₃ + …, where E(L) = ∂L/∂q − d/dt ∂L/∂q̇ + d²/dt² ∂L/∂q̈ is the
@@ -21,10 +21,10 @@ import sympy as sp
 from curves import curve as _q, derivative as _d, parameters as _params
 from conftest import PAIR
 from symvi import Model, PairGroupoid, h
-from symvi.consistency import (check_consistency, euler_lagrange, expand_residual,
+from symvi.checks.expansions import (check_consistency, euler_lagrange, expand_residual,
                                residual_expansion)
-from symvi.derive import derive
-from symvi.discretise import discretise
+from symvi.derivation.derive import derive
+from symvi.discretisation.discretise import discretise
 from symvi.errors import ModelError
 from symvi.models import get
 

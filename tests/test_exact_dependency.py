@@ -1,4 +1,4 @@
-"""The heavy top with rotors under variational controlled equations (symvi.control): the
+"""The heavy top with rotors under variational controlled equations (symvi.declaration.control): the
 vertical-momentum dependency of its constraints becomes exact, and the solver removes it.
 
 With the forced discrete Euler–Lagrange equations of the first-order L_d, the discrete

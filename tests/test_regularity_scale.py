@@ -7,13 +7,13 @@ import numpy as np
 import pytest
 import sympy as sp
 
-import symvi.derive as derive_module
+import symvi.derivation.derive as derive_module
 from symvi import Example, Model, PairGroupoid, compile_model
-from symvi.derive import derive
-from symvi.discretise import discretise
+from symvi.derivation.derive import derive
+from symvi.discretisation.discretise import discretise
 from symvi.errors import ModelError
 from symvi.models import get
-from symvi.rank import generic_rank
+from symvi.declaration.rank import generic_rank
 
 SMALL = 1e-11
 

@@ -1,4 +1,4 @@
-"""Fixing the multipliers where the constraints are exactly dependent (:mod:`symvi.control`).
+"""Fixing the multipliers where the constraints are exactly dependent (:mod:`symvi.declaration.control`).
 
 With variational controlled equations and a symmetry Z that has no actuated component,
 Σ_k Z(x_k)·Φ_d^k depends on the fixed end elements only (the discrete Noether identity).

@@ -33,12 +33,12 @@ from ..version import __version__
 from .cache import (MANIFEST, compiler_command, compiler_identity, files_digest, inspect,
                     library_versions, problems, read_manifest, sources_digest, summary)
 from .ccompile import CompileTimeout, compile_extension
-from ..derive import derive
-from ..discretise import discretise
-from ..emit import CSource, emit, templates_digest
+from ..derivation.derive import derive
+from ..discretisation.discretise import discretise
+from ..codegen.emit import CSource, emit, templates_digest
 from ..errors import BuildError, CacheWarning, CompilerNotFoundError, DamagedPackageError
 from .files import writing
-from ..model import Model
+from ..declaration.model import Model
 from .package import runtime_files, write_package
 from .stages import Expired, Progress, StageClock
 from .swap import Layout, ensure_folder
@@ -61,7 +61,7 @@ def cache_key(model: Model) -> str:
     * the model: its fingerprint and its description (the package's docstring and
       ``INFO`` carry it);
     * symvi's version (written into ``INFO`` and the C source's header);
-    * the templates (:func:`~symvi.emit.templates_digest`) and the run-time files copied
+    * the templates (:func:`~symvi.codegen.emit.templates_digest`) and the run-time files copied
       into the package (``symvi/_runtime/*.py``), read from disk as the build would;
     * the sources of every symvi module that generates the files: the closure of the
       symvi-internal imports of the modules the build runs, without the checks, the

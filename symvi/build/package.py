@@ -14,8 +14,8 @@ from typing import Any
 
 from ..version import __version__
 from .cache import file_records, write_manifest
-from ..derive import DerivedModel
-from ..emit import CSource, environment
+from ..derivation.derive import DerivedModel
+from ..codegen.emit import CSource, environment
 from ..errors import BuildError
 from .files import write_file, writing
 

@@ -2,7 +2,7 @@
 continuous equations (DESIGN.md §5; issue 5, item 3).
 
 The residual at the middle node of the derived stencil is expanded in h along a smooth
-curve (:mod:`symvi.consistency`: pair nodes q(t + jh), group increments ξ_i sampled at the
+curve (:mod:`symvi.checks.expansions`: pair nodes q(t + jh), group increments ξ_i sampled at the
 middle of their element, action base points from β, multipliers at their window's middle
 node). It passes when its leading term is ±h^p·E with E the variational derivative of the
 action —
@@ -18,10 +18,10 @@ and reports p, the sign and the order (next power − leading power: the relativ
 the residual as an approximation of h^p·E). A correct symmetric rule gives +h·E + O(h³),
 order 2. It fails when the leading term is not ±h^p·E — naming, per component, the
 leading coefficient, the expected one and their difference — or when the order falls
-short of the rule's declared ``consistency_order`` (:mod:`symvi.rules`).
+short of the rule's declared ``consistency_order`` (:mod:`symvi.discretisation.rules`).
 
 Skipped: models declared with a discrete Lagrangian only (there is no continuous equation;
-:func:`symvi.consistency.check_consistency` takes a continuous reference model), groupoids
+:func:`symvi.checks.expansions.check_consistency` takes a continuous reference model), groupoids
 the expansion cannot sample, and residuals with operations the series arithmetic does not
 support (the reason says which).
 """
@@ -31,7 +31,7 @@ import time
 
 import sympy as sp
 
-from ..consistency import (ConsistencyReport, check_consistency, compact, component_names,
+from .expansions import (ConsistencyReport, check_consistency, compact, component_names,
                            unsupported)
 from ..errors import ModelError
 from .report import CheckResult
@@ -90,7 +90,7 @@ def run(ctx) -> CheckResult:
     if model.lagrangian is None:
         return CheckResult.skipped(
             NAME, "declared with a discrete Lagrangian only: there is no continuous "
-                  "equation to compare with (symvi.consistency.check_consistency(model, "
+                  "equation to compare with (symvi.checks.expansions.check_consistency(model, "
                   "lagrangian_model=reference) takes one)")
     reason = unsupported(model.groupoid)
     if reason is not None:

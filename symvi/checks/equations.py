@@ -28,7 +28,7 @@ from dataclasses import dataclass, replace
 
 import sympy as sp
 
-from ..discretise import DiscreteModel, discretise
+from ..discretisation.discretise import DiscreteModel, discretise
 from ..errors import ModelError
 from .hand import HandDerived
 from .equivalence import (Hand, coefficient_note, in_controls, is_zero, limit_note,

@@ -16,8 +16,8 @@ from typing import TYPE_CHECKING, Any, Mapping
 
 import sympy as sp
 
-from ..discretise import h as STEP
-from ..rank import generic_rank
+from ..discretisation.discretise import h as STEP
+from ..declaration.rank import generic_rank
 from .spaces import Space
 
 if TYPE_CHECKING:

@@ -55,7 +55,7 @@ class HandDerived:
         plus ``Gamma1_j`` for the base point at node j, the parameters and ``h``;
         ``residual`` the discrete symbols of the 2r elements of its stencil,
         ``discrete_action`` those of its ``elements`` elements; ``euler_lagrange`` the
-        jets of :func:`symvi.jets.continuous_equations` (``Omega1_dddot``, ``theta1_d4``,
+        jets of :func:`symvi.checks.jets.continuous_equations` (``Omega1_dddot``, ``theta1_d4``,
         ``lambda1_dot``), or functions of time (``Omega1(t)``, ``lambda1(t)``, their
         derivatives; the base point's follow from the anchor).
     mode:

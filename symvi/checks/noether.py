@@ -1,24 +1,24 @@
 """Check ``noether``: declared symmetries leave L_d invariant or quasi-invariant (paper §4.4,
 Theorem ``teoremanoethergroupoids``).
 
-For each :class:`~symvi.symmetry.Symmetry` Z of the model, the change of one window's L_d
+For each :class:`~symvi.declaration.symmetry.Symmetry` Z of the model, the change of one window's L_d
 when every node moves along Z, minus the potential difference, must vanish identically
-(:func:`symvi.derive.invariance_defect`). It is evaluated at random points with the
+(:func:`symvi.derivation.derive.invariance_defect`). It is evaluated at random points with the
 window's base points computed exactly; on failure the defect is simplified symbolically to
 name the offending terms. The conserved F_Z itself is compiled as the ``noether`` kernel
 (``StepResult.noether``). For optimal-control models with variational equations the
 symmetries without actuated components are checked on the first-order L_d of the
 mechanical Lagrangian: the solver drops one constraint component per such symmetry
-(:mod:`symvi.control`), which is right only when the invariance is exact.
+(:mod:`symvi.declaration.control`), which is right only when the invariance is exact.
 """
 from __future__ import annotations
 
 import numpy as np
 import sympy as sp
 
-from ..derive import invariance_defect
-from ..discretise import mechanical_model
-from ..rank import sequential_lambdify
+from ..derivation.derive import invariance_defect
+from ..discretisation.discretise import mechanical_model
+from ..declaration.rank import sequential_lambdify
 from .report import CheckResult
 
 NAME = "noether"

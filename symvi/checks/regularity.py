@@ -2,7 +2,7 @@
 (paper §4.3; D₁₂L_d for first-order and D₁₃L_d for second-order pair-groupoid Lagrangians,
 their group analogues, the bordered matrix of a constrained problem).
 
-The generic rank is measured at random points (:func:`symvi.rank.generic_rank`: an analytic
+The generic rank is measured at random points (:func:`symvi.declaration.rank.generic_rank`: an analytic
 matrix has its generic rank at a random point with probability one). When the matrix is
 small and its entries short, its determinant is also computed and factored symbolically,
 and the factors that can vanish are reported as the singular locus.
@@ -14,9 +14,9 @@ from types import SimpleNamespace
 import numpy as np
 import sympy as sp
 
-from ..derive import step_jacobian
+from ..derivation.derive import step_jacobian
 from ..errors import ModelError
-from ..rank import generic_rank, sequential_lambdify
+from ..declaration.rank import generic_rank, sequential_lambdify
 from .noether import readable
 from .report import CheckResult
 

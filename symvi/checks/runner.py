@@ -11,10 +11,10 @@ import importlib
 from functools import cached_property
 from typing import Sequence
 
-from ..derive import DerivedModel, derive
-from ..discretise import DiscreteModel, discretise
+from ..derivation.derive import DerivedModel, derive
+from ..discretisation.discretise import DiscreteModel, discretise
 from ..errors import ModelError
-from ..model import Model
+from ..declaration.model import Model
 from .report import CheckReport, CheckResult
 
 #: name → what it checks (paper reference), in running order.

@@ -3,7 +3,7 @@ it may use (:mod:`symvi.checks.equations`).
 
 :func:`symbol_space` builds a :class:`Space`: for the continuous targets, the continuous
 symbols of §3.3 (and for ``euler_lagrange`` the named jets of
-:func:`symvi.jets.continuous_equations`); for the discrete ones, one window's discrete
+:func:`symvi.checks.jets.continuous_equations`); for the discrete ones, one window's discrete
 symbols (DESIGN.md §3), the stencil of the residual, or a trajectory for the discrete
 action.
 """
@@ -14,9 +14,9 @@ from typing import TYPE_CHECKING, Any
 
 import sympy as sp
 
-from ..discretise import DiscreteModel, discretise, h as STEP, slot_symbols
+from ..discretisation.discretise import DiscreteModel, discretise, h as STEP, slot_symbols
 from ..errors import ModelError
-from ..jets import continuous_equations
+from .jets import continuous_equations
 
 if TYPE_CHECKING:
     from .hand import HandDerived
@@ -111,7 +111,7 @@ def _continuous_space(hand: HandDerived, model, params: dict, fixed: dict) -> Sp
 
 def _euler_lagrange_space(model, params: dict, fixed: dict) -> Space:
     """EL_r(L + λ_AΦ^A) and Φ^A in named jet symbols; hand expressions may be written in
-    functions of time (:func:`symvi.jets.continuous_equations`)."""
+    functions of time (:func:`symvi.checks.jets.continuous_equations`)."""
     eqs = continuous_equations(model)
     symbols = list(eqs.symbols.values())
     return Space(list(eqs.equations), eqs.symbols | params, symbols,
@@ -185,5 +185,5 @@ def _action(model, discrete, elements: int) -> tuple[list, dict, list, list]:
 
 
 def _derive(model, discrete):
-    from ..derive import derive
+    from ..derivation.derive import derive
     return derive(discrete if discrete is not None else discretise(model))

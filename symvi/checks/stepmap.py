@@ -48,7 +48,7 @@ from typing import Sequence
 import numpy as np
 import sympy as sp
 
-from ..derive import DerivedModel
+from ..derivation.derive import DerivedModel
 from ..groupoids.base import Groupoid
 from .tape import ForwardTape
 

@@ -14,7 +14,7 @@ rank of the algebroid AG). A groupoid supplies only
   used to start Newton's method.
 
 Everything else (discrete Euler–Lagrange residuals of any order, momenta, Jacobians) is
-built from these by :mod:`symvi.derive`, so a new groupoid is a new subclass only.
+built from these by :mod:`symvi.derivation.derive`, so a new groupoid is a new subclass only.
 """
 from __future__ import annotations
 
@@ -26,7 +26,7 @@ import numpy as np
 import sympy as sp
 
 from ..errors import ModelError
-from ..rules import RULES, Rule, rule_names
+from ..discretisation.rules import RULES, Rule, rule_names
 
 
 def _shape(value, expected: tuple[int, ...], what: str) -> None:
@@ -107,7 +107,7 @@ class Groupoid(ABC):
 
     @abstractmethod
     def rules(self, order: int) -> tuple[Rule, ...]:
-        """The discretisation rules (:mod:`symvi.rules`) that apply to this groupoid at
+        """The discretisation rules (:mod:`symvi.discretisation.rules`) that apply to this groupoid at
         ``order``; the first is the default. Each owns its quadrature."""
 
     def default_discretisation(self, order: int) -> str:

@@ -25,7 +25,7 @@ import numpy as np
 import sympy as sp
 
 from ..errors import ModelError
-from ..rules import LIE, LIE_MIDPOINT
+from ..discretisation.rules import LIE, LIE_MIDPOINT
 from . import analytic
 from . import retraction as _retraction
 from .base import Algebroid, Groupoid, _shape

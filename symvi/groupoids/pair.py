@@ -6,7 +6,7 @@ from typing import Sequence
 import sympy as sp
 
 from ..errors import ModelError
-from ..rules import MIDPOINT, THREE_POINT, TRAPEZOID
+from ..discretisation.rules import MIDPOINT, THREE_POINT, TRAPEZOID
 from .base import Algebroid, Groupoid, _shape
 
 

@@ -11,7 +11,7 @@ import itertools
 import sympy as sp
 
 from ..errors import ModelError
-from ..rules import PRODUCT, PRODUCT2
+from ..discretisation.rules import PRODUCT, PRODUCT2
 from .base import Algebroid, Groupoid, _shape, block_algebroid
 
 

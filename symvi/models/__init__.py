@@ -10,7 +10,7 @@ import runpy
 from pathlib import Path
 
 from ..errors import ModelError
-from ..model import Model
+from ..declaration.model import Model
 
 _GROUP_MODELS = ("rigid_body", "heavy_top", "spherical_pendulum", "planar_body", "se3_body",
                  "rigid_body_oc", "heavy_top_rotors_oc")

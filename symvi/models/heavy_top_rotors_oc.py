@@ -14,7 +14,7 @@ come to rest again, in T = 2 with N = 200 steps.
 
 ``build(equations="variational")`` (bundled as ``heavy_top_rotors_oc_variational``)
 discretises the controlled equations as the forced discrete Euler–Lagrange equations of
-the first-order L_d instead (:mod:`symvi.control`). The top's unactuated equations conserve
+the first-order L_d instead (:mod:`symvi.declaration.control`). The top's unactuated equations conserve
 the vertical momentum Γ·∂l/∂Ω (the rotor torques are internal); that discretisation keeps
 the identity exactly, so the declared symmetry Z = (Γ, 0, 0) is an exact dependency of the
 constraints, which the solver removes. It is the formulation to use for motions that are

@@ -12,7 +12,7 @@ L_d is *invariant* when every window's action term is unchanged to first order, 
 δL_d(g_k, …, g_{k+r−1}) = f(last r−1 elements) − f(first r−1 elements) — for first order
 (r = 1) f is a function of a base point, for second order of one element. Then
 F_Z = ⟨momentum of the windows crossing a node, Z⟩ + f is conserved along every solution
-(the discrete Noether theorem); :mod:`symvi.derive` emits it as the ``noether`` kernel and
+(the discrete Noether theorem); :mod:`symvi.derivation.derive` emits it as the ``noether`` kernel and
 ``symvi check`` verifies the (quasi-)invariance.
 """
 from __future__ import annotations

@@ -1,7 +1,7 @@
 """Jets of smooth curves and the continuous Euler–Lagrange operators (DESIGN.md §5).
 
 Time derivatives are plain *jet* symbols until a result is reported, so the identities the
-consistency expansions (:mod:`symvi.consistency`) need are polynomial ones:
+consistency expansions (:mod:`symvi.checks.expansions`) need are polynomial ones:
 
 * :class:`_Jets`: q^{(k)}(t) on the pair groupoid, with :func:`_variational_derivative`
   E(L) = ∂L/∂q − d/dt ∂L/∂q̇ + d²/dt² ∂L/∂q̈;
@@ -10,7 +10,7 @@ consistency expansions (:mod:`symvi.consistency`) need are polynomial ones:
   from the anchor, q̇ = ρ(q) y;
 * :func:`euler_lagrange_algebroid`: the operator EL₁ of Appendix C.2 and its second-order
   version EL₂ (paper eq. ``ecuacionesvakonomoalgebroides2``, times −1), with signs and
-  conventions as stated in :mod:`symvi.consistency`;
+  conventions as stated in :mod:`symvi.checks.expansions`;
 * :func:`continuous_equations`: those equations with the constraints Φ^A = 0, in named
   jet symbols (``Omega1_dddot``, ``lambda1_dot``), for comparison with hand-derived ones;
 * :func:`constraint_functions`, and how each groupoid's fibre is sampled along a curve
@@ -27,8 +27,8 @@ from typing import Sequence
 import sympy as sp
 from sympy.core.function import AppliedUndef
 
-from .errors import ModelError
-from .model import Model
+from ..errors import ModelError
+from ..declaration.model import Model
 from .series import _Generators, _Poly, _generator, active_generators, generator_expr, in_scope
 
 #: Time variable of the continuous curve the nodes are sampled from.
@@ -268,7 +268,7 @@ class _AlgebroidJets:
 
 
 def _algebroid_operator(jets: _AlgebroidJets, lagrangian: sp.Expr, order: int) -> sp.Matrix:
-    """EL_r(L) on jets (:mod:`symvi.consistency`): d/dt P_α − ρ^i_α ∂L/∂q^i + C^γ_{αβ} y^β P_γ with
+    """EL_r(L) on jets (:mod:`symvi.checks.expansions`): d/dt P_α − ρ^i_α ∂L/∂q^i + C^γ_{αβ} y^β P_γ with
     P = ∂L/∂y (r = 1) or ∂L/∂y − d/dt ∂L/∂ẏ (r = 2)."""
     y0 = [column[0] for column in jets.y]
     P = []
@@ -291,8 +291,8 @@ def _algebroid_operator(jets: _AlgebroidJets, lagrangian: sp.Expr, order: int) -
 def euler_lagrange_algebroid(groupoid, lagrangian: sp.Expr, order: int,
                              t: sp.Symbol = TIME, constraints: Sequence[sp.Expr] = ()) -> sp.Matrix:
     """The Euler–Lagrange operator EL_r(L) on the algebroid of ``groupoid`` along functions of
-    ``t`` (:mod:`symvi.consistency`): EL₁ of Appendix C.2 for ``order`` 1 (the same as
-    :func:`symvi.control.euler_lagrange_operator`), the second-order operator EL₂ for
+    ``t`` (:mod:`symvi.checks.expansions`): EL₁ of Appendix C.2 for ``order`` 1 (the same as
+    :func:`symvi.declaration.control.euler_lagrange_operator`), the second-order operator EL₂ for
     ``order`` 2. ``lagrangian`` (and ``constraints``) are written in the groupoid's
     continuous symbols; with constraints Φ^A the operator acts on L + λ_A(t) Φ^A, the
     multipliers being functions ``lambda0(t)``, ``lambda1(t)``, … of time.

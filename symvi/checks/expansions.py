@@ -12,7 +12,7 @@ E = δS/δ(node), with one sign for every groupoid and order:
   which is minus the usual first-order expression d/dt ∂L/∂q̇ − ∂L/∂q and equal to the
   usual second-order one;
 * on a Lie algebroid (q, y; anchor ρ, structure functions C), E = −EL_r(L) with
-  the operator of Appendix C.2 (:func:`symvi.control.euler_lagrange_operator`)
+  the operator of Appendix C.2 (:func:`symvi.declaration.control.euler_lagrange_operator`)
 
       EL₁(L)_α = d/dt ∂L/∂y^α − ρ^i_α ∂L/∂q^i + C^γ_{αβ} y^β ∂L/∂y^γ
 
@@ -64,8 +64,8 @@ needed are polynomial ones. The coefficients are sparse Laurent polynomials with
 coefficients in the atoms they contain (jets, parameters, values such as sin(q)) rather
 than SymPy expressions — ``sympy.expand`` of products of large sums was the cost — and are
 tested for zero as expressions at the end (:func:`_is_zero`: random points, then
-``simplify`` when small). The series arithmetic lives in :mod:`symvi.series`, the jets and
-the continuous operators in :mod:`symvi.jets`; this module samples stencils, expands them
+``simplify`` when small). The series arithmetic lives in :mod:`symvi.checks.series`, the jets and
+the continuous operators in :mod:`symvi.checks.jets`; this module samples stencils, expands them
 and compares the result with the continuous equations.
 """
 from __future__ import annotations
@@ -77,12 +77,12 @@ from typing import Sequence
 import sympy as sp
 from sympy.core.function import AppliedUndef
 
-from .derive import DerivedModel, derive
-from .discretise import discretise
-from .errors import ModelError
+from ..derivation.derive import DerivedModel, derive
+from ..discretisation.discretise import discretise
+from ..errors import ModelError
 from .jets import (TIME, _AlgebroidJets, _Jets, _layout, _variational_derivative, component_names,
                    constraint_functions, euler_lagrange_algebroid, unsupported)
-from .model import Model
+from ..declaration.model import Model
 from .series import (_EXACT, _QQ, _Expander, _is_zero, _Poly, _Series, _series_of, _truncate,
                      expansion_scope)
 

@@ -1,6 +1,6 @@
 """Truncated Laurent-series arithmetic for the consistency expansions (DESIGN.md §5).
 
-The expansions of :mod:`symvi.consistency` run over a residual's expression tree (sums,
+The expansions of :mod:`symvi.checks.expansions` run over a residual's expression tree (sums,
 products, integer powers, analytic functions of one argument — the exponential
 retraction's coefficient functions of :mod:`symvi.groupoids.analytic` through their exact
 Taylor series) with a small arithmetic that tracks up to which power of h every
@@ -30,8 +30,8 @@ from typing import Mapping, Sequence
 import sympy as sp
 from sympy.polys.domains import QQ
 
-from .errors import ModelError
-from .groupoids.analytic import AnalyticCoefficient
+from ..errors import ModelError
+from ..groupoids.analytic import AnalyticCoefficient
 
 _EXACT = 10**9  # "exact to every power": precision of expressions free of h
 
@@ -92,7 +92,7 @@ def _table() -> _Generators:
     table = _SCOPE.get()
     if table is None:
         raise RuntimeError("series arithmetic outside an expansion scope: decorate the entry "
-                           "point with symvi.series.expansion_scope")
+                           "point with symvi.checks.series.expansion_scope")
     return table
 
 

@@ -4,7 +4,7 @@ This is the first stage of the pipeline (DESIGN.md §1). A :class:`Model` is val
 it is built: undeclared symbols, non-scalar Lagrangians, bad parameter defaults and a
 discretisation that does not fit the Lagrangian's order are refused with a message that
 names the problem. Regularity (an invertible step map) needs the derived equations and is
-checked by :func:`symvi.derive.derive`.
+checked by :func:`symvi.derivation.derive.derive`.
 """
 from __future__ import annotations
 
@@ -16,8 +16,8 @@ from typing import Any, Mapping, Sequence
 import sympy as sp
 
 from .symbols import h
-from .errors import ModelError
-from .groupoids.base import Groupoid
+from ..errors import ModelError
+from ..groupoids.base import Groupoid
 from .rank import generic_rank
 from .symmetry import Symmetry
 from .validation import check_model_name, check_smooth, scalar
@@ -73,7 +73,7 @@ class Model:
 
     Give either a continuous ``lagrangian`` (in the groupoid's continuous symbols, e.g.
     ``G.q``, ``G.qdot`` and, for second order, ``G.qddot``) together with a
-    ``discretisation`` (see :data:`symvi.rules.RULES`), or a ``discrete_lagrangian``
+    ``discretisation`` (see :data:`symvi.discretisation.rules.RULES`), or a ``discrete_lagrangian``
     directly (in the groupoid's discrete symbols and :data:`h`) with its ``order``.
 
     Parameters
@@ -105,12 +105,12 @@ class Model:
         by ``solve_bvp`` (an optimal-control problem's u = EL(L)_a; see
         :func:`symvi.optimal_control`).
     symmetries:
-        Noether symmetries (:class:`symvi.symmetry.Symmetry`): their conserved quantities
+        Noether symmetries (:class:`symvi.declaration.symmetry.Symmetry`): their conserved quantities
         F_Z are compiled (``StepResult.noether``) and ``symvi check`` verifies the
         invariance (paper §4.4).
     control_system:
         Set by :func:`symvi.optimal_control`: the controlled system
-        (:class:`symvi.control.ControlSystem`) the Lagrangian and constraints come from.
+        (:class:`symvi.declaration.control.ControlSystem`) the Lagrangian and constraints come from.
     """
 
     name: str

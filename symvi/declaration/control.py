@@ -12,7 +12,7 @@ and the Euler–Lagrange operator of Appendix C.2
 Minimising ∫ C(q, y, u) dt is then the second-order variational problem with
 L̃(q, y, ẏ) = C(q, y, EL(L)_a) (eq. ``costLtilde``), constrained by Φ^A = EL(L)_A = 0
 when underactuated (§3.3.2). :func:`optimal_control` builds that problem as a
-:class:`~symvi.model.Model` with constraints; the groupoid's second-order rule discretises
+:class:`~symvi.declaration.model.Model` with constraints; the groupoid's second-order rule discretises
 L̃ and Φ (DESIGN.md §3) and the whole-trajectory solve finds the optimal path, its
 multipliers and the controls u_k = EL(L)_a at each window's quadrature point.
 
@@ -35,8 +35,8 @@ from typing import Any, Mapping, Sequence
 
 import sympy as sp
 
-from .errors import ModelError
-from .groupoids.base import Algebroid, Groupoid
+from ..errors import ModelError
+from ..groupoids.base import Algebroid, Groupoid
 from .model import Example, Model
 from .symmetry import Symmetry
 from .validation import scalar

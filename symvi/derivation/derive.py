@@ -29,10 +29,10 @@ from typing import Sequence
 import numpy as np
 import sympy as sp
 
-from .discretise import DiscreteModel
-from .errors import ModelError
-from .groupoids.analytic import used_coefficients
-from .rank import generic_rank
+from ..discretisation.discretise import DiscreteModel
+from ..errors import ModelError
+from ..groupoids.analytic import used_coefficients
+from ..declaration.rank import generic_rank
 
 
 @dataclass(frozen=True)

@@ -12,12 +12,12 @@ from typing import TYPE_CHECKING
 
 import sympy as sp
 
-from .groupoids.base import Groupoid
+from ..groupoids.base import Groupoid
 from .rules import Rule
-from .symbols import h
+from ..declaration.symbols import h
 
 if TYPE_CHECKING:
-    from .model import Model
+    from ..declaration.model import Model
 
 Slot = tuple[tuple[sp.Symbol, ...], tuple[sp.Symbol, ...]]
 
@@ -41,12 +41,12 @@ class DiscreteModel:
     multipliers: tuple[sp.Symbol, ...] = ()
     #: Controls at a window's quadrature point (slot coordinates).
     controls: tuple[sp.Expr, ...] = ()
-    #: Declared Noether symmetries (:class:`symvi.symmetry.Symmetry`, base coordinates).
+    #: Declared Noether symmetries (:class:`symvi.declaration.symmetry.Symmetry`, base coordinates).
     symmetries: tuple = ()
     #: (name, Z_A) per symmetry Z that makes the constraints exactly dependent (variational
     #: controlled equations, Z without actuated components): Z's components along the
     #: constraints at the window's middle node x₁. The multipliers are then fixed only up
-    #: to λ^k + c Z(x_k) (:mod:`symvi.control`).
+    #: to λ^k + c Z(x_k) (:mod:`symvi.declaration.control`).
     gauges: tuple[tuple[str, tuple[sp.Expr, ...]], ...] = ()
 
 
@@ -59,7 +59,7 @@ def slot_symbols(groupoid: Groupoid, order: int) -> tuple[Slot, ...]:
 
 
 def discretise(model: "Model") -> DiscreteModel:
-    """Turn a validated :class:`~symvi.model.Model` into a :class:`DiscreteModel`."""
+    """Turn a validated :class:`~symvi.declaration.model.Model` into a :class:`DiscreteModel`."""
     g = model.groupoid
     slots = slot_symbols(g, model.order)
     xs, fs = [s[0] for s in slots], [s[1] for s in slots]
@@ -114,7 +114,7 @@ def node_variation(groupoid: Groupoid, lagrangian: sp.Expr, rule: Rule, xs, fs) 
 
 def _variational_control(system, g: Groupoid, rule: Rule, xs, fs):
     """(L̃_d, Φ_d, u_d) on one window from the forced discrete Euler–Lagrange equations of
-    the first-order L_d of the mechanical Lagrangian (:mod:`symvi.control`): with D the
+    the first-order L_d of the mechanical Lagrangian (:mod:`symvi.declaration.control`): with D the
     node variation, u = −D_a/h on the actuated directions, Φ_d = −D_A on the others
     (both ≈ EL(L), resp. h·EL(L), as the paper's rule gives them) and L̃_d the rule's
     quadrature of the cost at u."""

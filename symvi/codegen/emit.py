@@ -15,10 +15,10 @@ import sympy as sp
 from sympy.printing.c import C99CodePrinter
 from sympy.printing.codeprinter import PrintMethodNotImplementedError
 
-from .version import __version__
-from .derive import DerivedModel, Kernel
-from .errors import ModelError
-from .groupoids.analytic import THETA, AnalyticCoefficient, c_definition
+from ..version import __version__
+from ..derivation.derive import DerivedModel, Kernel
+from ..errors import ModelError
+from ..groupoids.analytic import THETA, AnalyticCoefficient, c_definition
 
 
 class ArrayPrinter(C99CodePrinter):
@@ -65,9 +65,9 @@ def template_dir() -> Path:
     Installed, they ship inside the package as ``symvi/templates``; in a source checkout
     they are the top-level ``templates/``.
     """
-    here = Path(__file__).resolve().parent
-    installed = here / "templates"
-    return installed if (installed / "module.c.j2").exists() else here.parent / "templates"
+    package = Path(__file__).resolve().parent.parent
+    installed = package / "templates"
+    return installed if (installed / "module.c.j2").exists() else package.parent / "templates"
 
 
 def environment() -> jinja2.Environment:

@@ -18,7 +18,7 @@ import numpy as np
 import sympy as sp
 from sympy.core.function import AppliedUndef
 
-from .errors import ModelError
+from ..errors import ModelError
 
 #: Functions with a kink or a jump: their second derivatives hold DiracDelta (or worse).
 NONSMOOTH = (sp.Abs, sp.sign, sp.Heaviside, sp.DiracDelta, sp.Max, sp.Min, sp.floor,

@@ -1,0 +1,1 @@
+"""Stage 4, code generation: kernels → C source through the templates (:mod:`.emit`)."""
