@@ -238,7 +238,7 @@ def test_zero_steps_is_valid(compiled):
 
 @pytest.mark.parametrize("call, pattern", [
     (lambda m: m.solve_bvp(np.zeros((2, 2)), np.zeros((2, 2)), 3, 0.1),
-     r"n_steps must be at least 4, got 3"),
+     r"n_steps must be at least 4 \(2 fixed nodes at each end.*free node.*\), got 3"),
     (lambda m: m.solve_bvp(np.zeros((2, 2)), np.zeros((3, 2)), 10, 0.1),
      r"end nodes.*shape \(3, 2\).*expected \(2, 2\)"),
     (lambda m: m.solve_bvp(np.zeros((2, 2)), np.zeros((2, 2)), 10, 0.1, guess=np.zeros((3, 2))),

@@ -398,7 +398,7 @@ def test_increments_of_half_turn_raise(rigid_body, retraction):
     (lambda m: m.solve_bvp(np.zeros((2, 4, 4)), np.stack([I3, I3]), 10, 0.1),
      r"start configurations.*shape \(2, 4, 4\)"),
     (lambda m: m.solve_bvp(np.stack([I3, I3]), np.stack([I3, I3]), 3, 0.1),
-     r"n_steps must be at least 4, got 3"),
+     r"n_steps must be at least 4 \(2 fixed nodes at each end.*free node.*\), got 3"),
     (lambda m: m.model.increments(I3, 0.1),
      r"configurations g must have shape \(K ≥ 2, 3, 3\), got \(3, 3\)"),
     (lambda m: m.model.increments(np.zeros((2, 2, 2)), 0.1),

@@ -82,12 +82,13 @@ def step_size(h) -> float:
     return h
 
 
-def count(value, what: str, minimum: int = 0, maximum: int = LONG_MAX) -> int:
-    """An integer in [minimum, maximum] (maximum: what the C argument can hold)."""
+def count(value, what: str, minimum: int = 0, maximum: int = LONG_MAX, why: str = "") -> int:
+    """An integer in [minimum, maximum] (maximum: what the C argument can hold); ``why``
+    explains the minimum in the message."""
     if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
         raise ValueError(f"{what} must be an integer, got {value!r}")
     if value < minimum:
-        raise ValueError(f"{what} must be at least {minimum}, got {value}")
+        raise ValueError(f"{what} must be at least {minimum}{why}, got {value}")
     if value > maximum:
         raise ValueError(f"{what} must be at most {maximum}, got {value}")
     return int(value)

@@ -190,7 +190,9 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
         raise ValueError(f"model {model.name!r}: no whole-trajectory solve on kind "
                          f"{info['kind']!r}")
     r = model.order
-    N = arguments.count(n_steps, "n_steps", 2 * r)
+    N = arguments.count(n_steps, "n_steps", 2 * r, why=(
+        f" ({r} fixed node{'s' if r > 1 else ''} at each end of an order-{r} problem and at "
+        f"least one free node between them)"))
     h, p = arguments.step_size(h), model.params(params)
     xtol, ftol = arguments.tolerance(xtol, "xtol"), arguments.tolerance(ftol, "ftol")
     maxiter = arguments.iterations(maxiter)
@@ -264,55 +266,69 @@ def _newton(problem, state, maxiter: int, xtol: float, ftol: float):
     """Damped Newton; returns (state, residual norms, step norms, status, message)."""
     from scipy.linalg import LinAlgError
 
-    norms, steps, status, message = [], [], Status.MAX_ITERATIONS, ""
+    norms, steps = [], []
     for it in range(maxiter):
-        res, ab, bw, finite = problem.assemble(state, True)
-        norms.append(float(np.abs(res).max(initial=0.0)))
-        if not finite:
-            status, message = Status.NON_FINITE, f"non-finite residual or Jacobian at iteration {it}"
-            break
         try:
-            delta = problem.solve(ab, bw, -res)
-        except (LinAlgError, ValueError):
-            # even at R = 0: the solution is then not isolated (e.g. L_d ≡ 0)
-            status, message = Status.SINGULAR_JACOBIAN, f"singular Jacobian at iteration {it}"
-            break
-        if norms[-1] <= ftol:
-            status = Status.SUCCESS
-            break
-        size = float(np.abs(delta).max(initial=0.0))
-        level = _rounding_level(ab[bw:], bw, problem.magnitudes(state))
-        if size <= xtol * (1.0 + problem.size(state)):
-            # Already converged: round-off defeats a line search.
-            moved = problem.moved(state, delta, 1.0)
-            state, taken = (moved, size) if moved is not None else (state, None)
-        elif norms[-1] <= level:
-            # Near the rounding level only a full step can still help; backtracking would
-            # chase noise.
-            state, taken = _line_search(problem, state, delta, res, min_alpha=1.0)
-        else:
-            taken = None
-            if problem.minimise:
-                state, taken = _descent_step(problem, state, res, ab, bw, delta)
-            if taken is None:
-                state, taken = _line_search(problem, state, delta, res)
-        if taken is None:
-            if norms[-1] <= level:
-                status = Status.SUCCESS  # no descent left below the rounding level
-                message = f" (at the rounding level {level:.1e} of the residual)"
-            else:
-                status, message = Status.STALLED, f"line search stalled at iteration {it}"
-            break
-        steps.append(taken)
-        if taken <= xtol * (1.0 + problem.size(state)):
-            status = Status.SUCCESS
-            norms.append(float(np.abs(problem.assemble(state, False)[0]).max(initial=0.0)))
-            break
+            state, taken, status, message = _iteration(problem, state, it, xtol, ftol, norms)
+        except LinAlgError as exc:
+            # a shifted or gauged Newton matrix that LAPACK could not factorise
+            return state, norms, steps, Status.SINGULAR_JACOBIAN, (
+                f"singular Newton matrix at iteration {it} (LAPACK: {exc})")
+        if taken is not None:
+            steps.append(taken)
+        if status is not None:
+            if status is Status.SUCCESS and taken is not None:
+                # the residual of the path returned, after the last update
+                norms.append(_residual_norm(problem, state))
+            return state, norms, steps, status, message
+    norms.append(_residual_norm(problem, state))
+    return (state, norms, steps, Status.MAX_ITERATIONS,
+            f"Newton's method did not converge in {maxiter} iterations")
+
+
+def _residual_norm(problem, state) -> float:
+    return float(np.abs(problem.assemble(state, False)[0]).max(initial=0.0))
+
+
+def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list):
+    """One damped Newton iteration from ``state`` (its residual norm appended to
+    ``norms``): (state, step taken or None, final status or None, message)."""
+    from scipy.linalg import LinAlgError
+
+    res, ab, bw, finite = problem.assemble(state, True)
+    norms.append(float(np.abs(res).max(initial=0.0)))
+    if not finite:
+        return state, None, Status.NON_FINITE, f"non-finite residual or Jacobian at iteration {it}"
+    try:
+        delta = problem.solve(ab, bw, -res)
+    except LinAlgError:
+        # even at R = 0: the solution is then not isolated (e.g. L_d ≡ 0)
+        return state, None, Status.SINGULAR_JACOBIAN, f"singular Jacobian at iteration {it}"
+    if norms[-1] <= ftol:
+        return state, None, Status.SUCCESS, ""
+    size = float(np.abs(delta).max(initial=0.0))
+    level = _rounding_level(ab[bw:], bw, problem.magnitudes(state))
+    if size <= xtol * (1.0 + problem.size(state)):
+        # Already converged: round-off defeats a line search.
+        moved = problem.moved(state, delta, 1.0)
+        state, taken = (moved, size) if moved is not None else (state, None)
+    elif norms[-1] <= level:
+        # Near the rounding level only a full step can still help; backtracking would
+        # chase noise.
+        state, taken = _line_search(problem, state, delta, res, min_alpha=1.0)
     else:
-        message = f"Newton's method did not converge in {maxiter} iterations"
-        # the residual of the path returned, after the last update
-        norms.append(float(np.abs(problem.assemble(state, False)[0]).max(initial=0.0)))
-    return state, norms, steps, status, message
+        taken = None
+        if problem.minimise:
+            state, taken = _descent_step(problem, state, res, ab, bw, delta)
+        if taken is None:
+            state, taken = _line_search(problem, state, delta, res)
+    if taken is None:
+        if norms[-1] <= level:  # no descent left below the rounding level
+            return state, None, Status.SUCCESS, f" (at the rounding level {level:.1e} of the residual)"
+        return state, None, Status.STALLED, f"line search stalled at iteration {it}"
+    if taken <= xtol * (1.0 + problem.size(state)):
+        return state, taken, Status.SUCCESS, ""
+    return state, taken, None, ""
 
 
 def _rounding_level(ab: np.ndarray, bw: int, u: np.ndarray) -> float:
@@ -332,6 +348,8 @@ def _band_product(ab: np.ndarray, bw: int, u: np.ndarray) -> np.ndarray:
     out = np.zeros_like(u)
     for d in range(2 * bw + 1):
         offset = d - bw  # row = column + offset
+        if abs(offset) >= u.size:       # a band wider than the matrix (few unknowns)
+            continue
         if offset >= 0:
             out[offset:] += ab[d, : u.size - offset] * u[: u.size - offset]
         else:
@@ -375,6 +393,8 @@ def _descent_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0**-1
     change is below its rounding level) or no shift helps; a step that climbs φ is
     shifted, never handed back, since the residual-norm line search would then climb S.
     """
+    from scipy.linalg import LinAlgError
+
     rows = problem.constraint_rows(state)
     nodes, lam, phi_d = ~rows, problem.multipliers(state), res[rows]
     infeasibility = float(np.abs(phi_d).sum())
@@ -395,7 +415,11 @@ def _descent_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0**-1
     scale, shift = float(np.abs(ab[2 * bw][nodes]).max(initial=0.0)), problem.shift
     while shift <= 1e3:
         if shift > 0.0:
-            delta = problem.solve(ab, bw, -res, shift * scale, nodes)
+            try:
+                delta = problem.solve(ab, bw, -res, shift * scale, nodes)
+            except LinAlgError:         # this shift makes the matrix singular: the next
+                shift = max(10 * shift, 1e-8)
+                continue
         descent, nu, alpha = slope(delta), problem.penalty, 1.0
         if rows.any() and _curvature(ab, bw, delta, nodes, shift * scale) <= 0.0:
             descent = 0.0       # into W's negative curvature: shift instead

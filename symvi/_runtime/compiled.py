@@ -7,6 +7,7 @@ import numpy as np
 
 from . import arguments
 from .bvp import solve_bvp
+from .geometry import check_base_points, check_configurations
 from .paths import increments
 from .stepping import integrate
 
@@ -187,7 +188,11 @@ class CompiledModel:
         fibres = arguments.finite_array(fibres, (K - 1, self.n),
                                         f"initial increments (the first {K - 1} fibre parts)")
         x0 = arguments.finite_array(x0, (self.m,), "initial base point x_0")
-        return np.concatenate([x0, fibres.reshape(-1)]), self._initial_configuration(parts)
+        check_base_points(self, x0[None, :], "initial base point x_0")
+        g0 = self._initial_configuration(parts)
+        if self.matrix_dims:
+            check_configurations(self, g0[None, :], "initial configuration g_0")
+        return np.concatenate([x0, fibres.reshape(-1)]), g0
 
     def _initial_configuration(self, parts) -> np.ndarray:
         dims = self.matrix_dims

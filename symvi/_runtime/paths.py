@@ -14,6 +14,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from . import arguments
+from .geometry import check_base_points, check_configurations
 from .results import BVPResult, Status
 
 
@@ -41,9 +42,17 @@ def _configurations(model, value, count: int, what: str) -> np.ndarray:
                            for b, d in zip(blocks, dims)], axis=1)
 
 
-def nodes(model, value, count: int, what: str) -> tuple[np.ndarray, np.ndarray]:
-    """Parse ``count`` nodes: base points (count, m) on a pair groupoid, configurations
-    (count, d, d) on a Lie group, ``(x, g)`` when there are both."""
+def nodes(model, value, count: int, what: str, first: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """Parse ``count`` nodes, numbered from ``first``: base points (count, m) on a pair
+    groupoid, configurations (count, d, d) on a Lie group, ``(x, g)`` when there are both;
+    each checked against its geometry (:mod:`.geometry`)."""
+    x, g = _parse_nodes(model, value, count, what)
+    check_configurations(model, g, f"{what} configurations", first)
+    check_base_points(model, x, f"{what} base points", first)
+    return x, g
+
+
+def _parse_nodes(model, value, count: int, what: str) -> tuple[np.ndarray, np.ndarray]:
     m, dims = model.m, model.matrix_dims
     if not dims:
         return arguments.finite_array(value, (count, m), f"{what} nodes"), np.zeros((count, 0))
@@ -121,7 +130,7 @@ def initial_path(model, start, end, N: int, guess, p, h):
     """
     r = model.order
     sx, sg = nodes(model, start, r, "start")
-    ex, eg = nodes(model, end, r, "end")
+    ex, eg = nodes(model, end, r, "end", N - r + 1)
     count = N + 1 - 2 * r
     if guess is None or isinstance(guess, str):
         interpolated = _interpolated(model, (sx, sg), (ex, eg), count, guess or "cubic", p)
@@ -129,7 +138,7 @@ def initial_path(model, start, end, N: int, guess, p, h):
             return interpolated
         x, g = interpolated
     else:
-        gx, gg = nodes(model, guess, count, "guess of the free")
+        gx, gg = nodes(model, guess, count, "guess of the free", r)
         x, g = np.concatenate([sx, gx, ex]), np.concatenate([sg, gg, eg])
     x, g = np.ascontiguousarray(x), np.ascontiguousarray(g)
     f = fibres(model, x, g, p, h, lambda k: f"the initial path: w_{k} = g_{k}⁻¹ g_{k + 1}")
@@ -174,6 +183,7 @@ def increments(model, g, h: float, params=None) -> np.ndarray:
     if len(shape) != 3 or shape[0] < 2:
         raise ValueError(f"configurations g must have shape (K ≥ 2, {d}, {d}), got {shape}")
     g = arguments.finite_array(g, (shape[0], d, d), "configurations g").reshape(shape[0], -1)
+    check_configurations(model, g, "configurations g")
     out = fibres(model, np.zeros((shape[0], 0)), g, model.params(params),
                  arguments.step_size(h), lambda k: f"w_{k} = g_{k}⁻¹ g_{k + 1}")
     if isinstance(out, BVPResult):

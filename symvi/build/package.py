@@ -72,6 +72,7 @@ def info(dm: DerivedModel, key: str, description: str) -> dict:
         "symvi_version": __version__, "key": key,
         "configuration_dim": dm.c_context["configuration_dim"],
         "matrix_dims": [G["matrix_dim"] for G in dm.c_context["groups"]],
+        "groups": [{"label": G["label"], **G["invariants"]} for G in dm.c_context["groups"]],
         "description": description,
         "kernels": {k.name: {"nz": len(k.z), "outputs": [len(M) for _, M in k.outputs]}
                     for k in dm.kernels},

@@ -228,6 +228,11 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
         Kernel("lagrangian", window.z, (("value", sp.Matrix([engine.lagrangian(window, 0)])),),
                "L_d on one window of r elements", window.definitions),
     ]
+    manifold = g.manifold(one.xs[0])
+    if manifold:
+        kernels.append(Kernel("manifold", one.xs[0], (("value", sp.Matrix(manifold)),),
+                              "equations F(x) = 0 of the base manifold at a base point",
+                              along=False))
     if g.whole_trajectory:
         eta = tuple(sp.Dummy(f"eta_{a}", real=True) for a in range(g.fibre_dim))
         kernels += [

@@ -40,6 +40,11 @@ class ActionGroupoid(Groupoid):
         at random points and group elements (a right action).
     label:
         Name for messages and fingerprints.
+    manifold:
+        Optional ``manifold(q)`` → expressions F(q) whose zero set is the submanifold of
+        Q the base points live on (S² ⊂ R³: ``lambda q: [q.dot(q) - 1]``). It must be
+        invariant under the action (checked: F is constant along the action's generators).
+        Base points passed at run time are then checked to lie on it.
     """
 
     kind = "action"
@@ -49,7 +54,8 @@ class ActionGroupoid(Groupoid):
     structure_check = True
 
     def __init__(self, group: MatrixLieGroup, base: str | Sequence[str], action: Action,
-                 label: str | None = None):
+                 label: str | None = None,
+                 manifold: Callable[[sp.Matrix], Sequence[sp.Expr]] | None = None):
         if not isinstance(group, MatrixLieGroup):
             raise ModelError(f"the acting group must be a MatrixLieGroup, got {group!r}")
         self.group = group
@@ -72,9 +78,31 @@ class ActionGroupoid(Groupoid):
         self._generators = sp.Matrix.hstack(*[
             sp.diff(self._phi.xreplace(dict(zip(self._W, sp.eye(group.matrix_dim) + e * E))), e)
             .xreplace({e: 0}) for E in group.basis]).applyfunc(sp.expand)
+        self._manifold = self._declared_manifold(manifold)
 
     def __repr__(self) -> str:
         return f"ActionGroupoid({self.label}: {list(self.names)} × {self.group!r})"
+
+    def _declared_manifold(self, manifold) -> sp.Matrix:
+        if manifold is None:
+            return sp.zeros(0, 1)
+        try:
+            F = sp.Matrix(list(manifold(sp.Matrix(self.q))))
+        except Exception as exc:
+            raise ModelError(f"{self.label}: the manifold failed on symbolic input: {exc}") from None
+        unknown = F.free_symbols - set(self.q)
+        if unknown:
+            raise ModelError(f"{self.label}: the manifold's equations may use the base "
+                             f"coordinates only, not {sorted(map(str, unknown))}")
+        drift = (F.jacobian(self.q) * self._generators).applyfunc(sp.simplify)
+        if drift != sp.zeros(*drift.shape):
+            raise ModelError(f"{self.label}: the manifold F = {list(F)} is not invariant "
+                             f"under the action: its derivatives along the generators are "
+                             f"{drift.tolist()}, not zero")
+        return F
+
+    def manifold(self, x):
+        return tuple(self._manifold.xreplace(dict(zip(self.q, x))))
 
     # -- the action ---------------------------------------------------------------------
     def _evaluate_action(self, q: sp.Matrix, W: sp.Matrix) -> sp.Matrix:
@@ -215,7 +243,8 @@ class ActionGroupoid(Groupoid):
         _shape(parts[-1], (2 * order - 1, self.fibre_dim), "initial increments ξ")
 
     def fingerprint(self) -> str:
-        return f"action:{self.label}:{self.names}:{sp.srepr(self._phi)}:{self.group.fingerprint()}"
+        return (f"action:{self.label}:{self.names}:{sp.srepr(self._phi)}:"
+                f"{sp.srepr(self._manifold)}:{self.group.fingerprint()}")
 
     def fibre_sampling(self):
         return (None,) * self.fibre_dim          # ξ at the element's middle

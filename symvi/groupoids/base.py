@@ -229,6 +229,12 @@ class Groupoid(ABC):
         """The factors of a product groupoid; ``(self,)`` for any other."""
         return (self,)
 
+    def manifold(self, x: Sequence[sp.Expr]) -> tuple[sp.Expr, ...]:
+        """Equations F(x) = 0 of the submanifold of the base that the model's base points
+        live on (an action groupoid's declared ``manifold``); none by default. Compiled
+        into the ``manifold`` kernel, with which the run time checks the user's data."""
+        return ()
+
     def matrix_groups(self) -> tuple:
         """The matrix Lie groups of this groupoid (a Lie group, an action groupoid's
         acting group, a product's): their Lie algebra bases must close."""

@@ -96,6 +96,37 @@ class MatrixLieGroup(Groupoid):
         """Σ v_a E_a."""
         return sum((vi * E for vi, E in zip(v, self.basis)), sp.zeros(self.matrix_dim))
 
+    def invariants(self) -> dict[str, list]:
+        """What the algebra fixes, as numbers: the conditions a configuration must meet to
+        lie on the group, checked on the user's data at run time.
+
+        ``quadratic`` J (gᵀJg = J: EᵀJ + JE = 0 for every basis E), ``coquadratic`` K
+        (gKgᵀ = K: EK + KEᵀ = 0), ``fixed`` vectors (gv = v: Ev = 0) and ``cofixed``
+        covectors (wᵀg = wᵀ: wᵀE = 0), each a basis of its solution space; and det g > 0,
+        since the group is connected. SO(n): gᵀg = I; SE(n): the rotation block
+        orthogonal and the last row (0, …, 0, 1). A group that these conditions do not
+        cut out is checked only as far as they go.
+        """
+        d = self.matrix_dim
+        S = [sp.Symbol(f"s_{i}_{j}") for i in range(d) for j in range(i, d)]
+        M = sp.zeros(d)
+        for (i, j), s in zip(((i, j) for i in range(d) for j in range(i, d)), S):
+            M[i, j] = M[j, i] = s
+
+        def symmetric_solutions(condition) -> list:
+            equations = [e for E in self.basis for e in condition(E, M)]
+            A = sp.Matrix([[sp.diff(e, s) for s in S] for e in equations])
+            return [[[float(v) for v in row] for row in M.subs(dict(zip(S, vec))).tolist()]
+                    for vec in A.nullspace()]
+
+        def kernel(rows) -> list:
+            return [[float(v) for v in vec] for vec in sp.Matrix.vstack(*rows).nullspace()]
+
+        return {"quadratic": symmetric_solutions(lambda E, J: E.T * J + J * E),
+                "coquadratic": symmetric_solutions(lambda E, K: E * K + K * E.T),
+                "fixed": kernel(self.basis),
+                "cofixed": kernel([E.T for E in self.basis])}
+
     def _closure(self):
         n, constants = len(self.basis), {}
         for a in range(n):
@@ -275,6 +306,7 @@ class MatrixLieGroup(Groupoid):
     def group_context(self, offset: int = 0) -> dict:
         """One matrix-group factor for ``templates/group.c.j2``; ξ starts at f[offset]."""
         return {"matrix_dim": self.matrix_dim, "dim": self.fibre_dim, "offset": offset,
+                "label": self.label, "invariants": self.invariants(),
                 "basis": [[float(v) for v in E] for E in self.basis],
                 "dual": [[float(v) for v in row] for row in self._dual.tolist()],
                 **self.retraction.c_context()}

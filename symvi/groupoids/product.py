@@ -138,6 +138,10 @@ class ProductGroupoid(Groupoid):
     def algebroid(self) -> Algebroid:
         return block_algebroid([f.algebroid() for f in self.factors])
 
+    def manifold(self, x):
+        return tuple(v for factor, xi in zip(self.factors, self._split(x, self._m))
+                     for v in factor.manifold(xi))
+
     def move(self, x, eta):
         return tuple(v for factor, xi, ei in zip(self.factors, self._split(x, self._m),
                                                  self._split(eta, self._n))

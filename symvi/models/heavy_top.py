@@ -13,7 +13,8 @@ from symvi import SO3, ActionGroupoid, Example, Model, Symmetry
 
 def build(retraction: str = "cayley") -> Model:
     H = SO3(retraction=retraction)
-    G = ActionGroupoid(H, "Gamma1 Gamma2 Gamma3", lambda q, W: W.T * q, label="S2xSO3")
+    G = ActionGroupoid(H, "Gamma1 Gamma2 Gamma3", lambda q, W: W.T * q, label="S2xSO3",
+                       manifold=lambda q: [q.dot(q) - 1])
     Omega, Gamma = sp.Matrix(G.xi), sp.Matrix(G.q)
     I1, I2, I3, mgl = sp.symbols("I1 I2 I3 mgl", positive=True)
     chi = sp.Matrix(sp.symbols("chi1 chi2 chi3", real=True))

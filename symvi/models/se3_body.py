@@ -19,7 +19,8 @@ def _action(q, W):
 
 def build(retraction: str = "cayley") -> Model:
     H = SE3(retraction=retraction)
-    G = ActionGroupoid(H, "z Gamma1 Gamma2 Gamma3", _action, label="RxS2xSE3")
+    G = ActionGroupoid(H, "z Gamma1 Gamma2 Gamma3", _action, label="RxS2xSE3",
+                       manifold=lambda q: [q[1:, 0].dot(q[1:, 0]) - 1])
     Omega, V = sp.Matrix(G.xi[:3]), sp.Matrix(G.xi[3:])
     z = G.q[0]
     J1, J2, J3, m, g, k = sp.symbols("J1 J2 J3 m g k", positive=True)

@@ -14,7 +14,8 @@ from symvi import SO3, ActionGroupoid, Example, Model, Symmetry
 
 def build(retraction: str = "cayley") -> Model:
     H = SO3(names="w1 w2 w3", retraction=retraction)
-    G = ActionGroupoid(H, "Gamma1 Gamma2 Gamma3", lambda q, W: W.T * q, label="S2xSO3")
+    G = ActionGroupoid(H, "Gamma1 Gamma2 Gamma3", lambda q, W: W.T * q, label="S2xSO3",
+                       manifold=lambda q: [q.dot(q) - 1])
     w, Gamma = G.xi, G.q
     m, l, g, J = sp.symbols("m l g J", positive=True)
     suffix = "" if retraction == "cayley" else f"_{retraction}"

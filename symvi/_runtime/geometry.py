@@ -1,0 +1,90 @@
+"""User data checked against its geometry: configurations on their matrix group, base
+points on their declared manifold.
+
+A configuration g (d×d) of a matrix-group factor must meet the conditions its Lie algebra
+fixes (``INFO["groups"]``, from :meth:`MatrixLieGroup.invariants`): gᵀJg = J, gKgᵀ = K,
+gv = v, wᵀg = wᵀ and det g > 0 — for SO(3) orthogonality and determinant 1, for SE(n) an
+orthogonal rotation block and the last row (0, …, 0, 1). A base point must satisfy the
+equations of its manifold when the model declares them (the ``manifold`` kernel, e.g.
+|Γ|² − 1 = 0 on S²). Off-group data would otherwise be integrated or solved silently:
+g = 2I is a fixed point of every step and the solve reports success.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+#: Largest defect accepted, relative to the size of the data: configurations built in
+#: floating point (a product of rotations, a rotation from Euler angles) are off by
+#: 1e-15–1e-13; re-orthonormalise data that is further off.
+TOLERANCE = 1e-9
+
+
+def group_defect(g: np.ndarray, invariants: dict) -> tuple[float, str]:
+    """The largest defect of the configuration g (d×d) against the group's conditions,
+    each relative to the size of the products it is computed from (so that an SE(n)
+    translation, which no condition involves, does not hide a rotation's defect), and
+    the condition it violates."""
+    with np.errstate(all="ignore"):             # huge data: an infinite defect, refused
+        return _group_defect(g, invariants)
+
+
+def _group_defect(g: np.ndarray, invariants: dict) -> tuple[float, str]:
+    worst, which = 0.0, ""
+    a = np.abs(g)
+
+    def consider(defect: np.ndarray, size: np.ndarray, what: str) -> None:
+        nonlocal worst, which
+        value = _size(defect) / max(1.0, _size(size))
+        if not value <= worst:      # NaN-safe: a NaN defect is the worst
+            worst, which = value, what
+
+    for J in map(np.asarray, invariants["quadratic"]):
+        consider(g.T @ J @ g - J, a.T @ np.abs(J) @ a, "gᵀJg = J (an invariant quadratic form)")
+    for K in map(np.asarray, invariants["coquadratic"]):
+        consider(g @ K @ g.T - K, a @ np.abs(K) @ a.T,
+                 "gKgᵀ = K (orthogonality of the rotation block)")
+    for v in map(np.asarray, invariants["fixed"]):
+        consider(g @ v - v, a @ np.abs(v), f"g v = v for v = {v.tolist()}")
+    for w in map(np.asarray, invariants["cofixed"]):
+        consider(w @ g - w, np.abs(w) @ a, f"wᵀg = wᵀ for w = {w.tolist()} (the last row)")
+    det = float(np.linalg.det(g))
+    if not det > 0.0:
+        consider(np.array([1.0 + abs(det)]), np.ones(1),
+                 f"det g > 0 (det g = {det:.6g}; the group is connected)")
+    return worst, which
+
+
+def _size(a: np.ndarray) -> float:
+    return float(np.abs(a).max(initial=0.0))
+
+
+def check_configurations(model, g: np.ndarray, what: str, first: int = 0) -> None:
+    """Raise ValueError when a configuration of ``g`` (nodes × Σd², flattened factor by
+    factor) is off its group; node numbers start at ``first``."""
+    at = 0
+    for d, group in zip(model.matrix_dims, model.info.get("groups", ())):
+        for k, flat in enumerate(g[:, at:at + d * d]):
+            defect, condition = group_defect(flat.reshape(d, d), group)
+            if not defect <= TOLERANCE:
+                raise ValueError(
+                    f"{what}: the configuration of node {first + k} is not on "
+                    f"{group['label']}: {condition} fails by {defect:.3e} (tolerance "
+                    f"{TOLERANCE:g}, relative); pass a configuration of the group "
+                    f"(re-orthonormalise the rotation, e.g. by its polar decomposition)")
+        at += d * d
+
+
+def check_base_points(model, x: np.ndarray, what: str, first: int = 0) -> None:
+    """Raise ValueError when a base point of ``x`` (nodes × m) is off the manifold the
+    model declares (its ``manifold`` kernel); nothing to check without one."""
+    if "manifold" not in model.info["kernels"] or not len(x):
+        return
+    for k, point in enumerate(np.ascontiguousarray(x, dtype=np.float64)):
+        values = model.evaluate("manifold", point, 1.0)[0]
+        with np.errstate(all="ignore"):         # huge data: an infinite defect, refused
+            defect = _size(values) / (1.0 + np.float64(_size(point)) ** 2)
+        if not defect <= TOLERANCE:
+            raise ValueError(
+                f"{what}: the base point of node {first + k}, {np.array2string(point)}, is "
+                f"not on the model's manifold: its equations give {np.array2string(values)} "
+                f"(defect {defect:.3e}, tolerance {TOLERANCE:g}, relative)")
