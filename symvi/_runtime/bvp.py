@@ -157,7 +157,7 @@ class _Problem:
 
 
 def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=None,
-              maxiter: int = 100, xtol: float = 1e-12, ftol: float = 0.0,
+              maxiter: int = 100, xtol: float = 1e-9, ftol: float = 0.0,
               raise_on_failure: bool = False) -> BVPResult:
     """Solve for the free nodes (and multipliers) with the first and last r nodes fixed.
 
@@ -175,8 +175,17 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
         the chord when r = 1, as there are no end velocities), and
         ``"chord"`` the positions only: g_{r−1} τ(s·τ⁻¹(g_{r−1}⁻¹ g_{N−r+1})).
         Multipliers start at zero.
-    maxiter, xtol, ftol : Newton stops when the update ‖Δ‖∞ ≤ xtol·(1 + size) or the
-        residual ‖R‖∞ ≤ ftol. The default of 100 iterations (SLSQP's) leaves room for
+    maxiter, xtol, ftol : SUCCESS when the full Newton correction ‖Δ‖∞ — the estimate
+        of the error left in the path (unknowns: node corrections and multipliers) —
+        is at most xtol·(1 + size) in two iterations in a row (at the rounding level
+        one correction can be small by cancellation), size the largest unknown, or
+        when ‖R‖∞ ≤ ftol.
+        Where the residual reaches its rounding level first, a full step is taken only
+        if it passes Deuflhard's natural monotonicity test; a path whose correction
+        still exceeds the tolerance there is ``ILL_CONDITIONED``, never SUCCESS, and
+        the message gives the correction as the attainable accuracy (the Newton matrix
+        of a second-order problem has κ ∝ N⁴; cubic_spline: about 1e-10 at N = 10³,
+        1e-7 at 10⁴, 1e-4 at 10⁵, each within a factor 2–4 of the true error). The default of 100 iterations (SLSQP's) leaves room for
         constrained problems started far from feasibility: the non-planar heavy top from
         the chord guess takes 52–73. Optimal-control problems are globalised on their
         cost (with constraints: its ℓ1 exact penalty S + ν‖Φ_d‖₁) with a shifted Hessian
@@ -266,10 +275,11 @@ def _newton(problem, state, maxiter: int, xtol: float, ftol: float):
     """Damped Newton; returns (state, residual norms, step norms, status, message)."""
     from scipy.linalg import LinAlgError
 
-    norms, steps = [], []
+    norms, steps, corrections = [], [], [np.inf]
     for it in range(maxiter):
         try:
-            state, taken, status, message = _iteration(problem, state, it, xtol, ftol, norms)
+            state, taken, status, message = _iteration(problem, state, it, xtol, ftol, norms,
+                                                       corrections)
         except LinAlgError as exc:
             # a shifted or gauged Newton matrix that LAPACK could not factorise
             return state, norms, steps, Status.SINGULAR_JACOBIAN, (
@@ -290,9 +300,11 @@ def _residual_norm(problem, state) -> float:
     return float(np.abs(problem.assemble(state, False)[0]).max(initial=0.0))
 
 
-def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list):
+def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list,
+               corrections: list):
     """One damped Newton iteration from ``state`` (its residual norm appended to
-    ``norms``): (state, step taken or None, final status or None, message)."""
+    ``norms``, its full Newton correction to ``corrections``): (state, step taken or
+    None, final status or None, message)."""
     from scipy.linalg import LinAlgError
 
     res, ab, bw, finite = problem.assemble(state, True)
@@ -306,29 +318,48 @@ def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list):
         return state, None, Status.SINGULAR_JACOBIAN, f"singular Jacobian at iteration {it}"
     if norms[-1] <= ftol:
         return state, None, Status.SUCCESS, ""
+    # SUCCESS only on full Newton corrections, the estimate of the error left (a damped
+    # step may be short far from the solution), and on two in a row: at the rounding
+    # level one correction can be small by cancellation, the error e and the rounding
+    # noise J⁻¹n in it nearly opposite, while the next path's error is J⁻¹n.
     size = float(np.abs(delta).max(initial=0.0))
+    tolerance = xtol * (1.0 + problem.size(state))
+    corrections.append(size)
     level = _rounding_level(ab[bw:], bw, problem.magnitudes(state))
-    if size <= xtol * (1.0 + problem.size(state)):
-        # Already converged: round-off defeats a line search.
-        moved = problem.moved(state, delta, 1.0)
-        state, taken = (moved, size) if moved is not None else (state, None)
-    elif norms[-1] <= level:
-        # Near the rounding level only a full step can still help; backtracking would
-        # chase noise.
-        state, taken = _line_search(problem, state, delta, res, min_alpha=1.0)
+    if size <= tolerance:
+        moved = problem.moved(state, delta, 1.0)    # round-off defeats a line search
+        if moved is not None and corrections[-2] <= tolerance:
+            return moved, size, Status.SUCCESS, (
+                f"; last Newton corrections {corrections[-2]:.1e}, {size:.1e}")
+        if moved is not None:
+            return moved, size, None, ""
+        taken = None
     else:
         taken = None
-        if problem.minimise:
+        if norms[-1] <= level:
+            state, taken = _natural_step(problem, state, delta, ab, bw, size)
+        if taken is None and problem.minimise:
             state, taken = _descent_step(problem, state, res, ab, bw, delta)
-        if taken is None:
+        if taken is None and norms[-1] > level:
             state, taken = _line_search(problem, state, delta, res)
     if taken is None:
         if norms[-1] <= level:  # no descent left below the rounding level
-            return state, None, Status.SUCCESS, f" (at the rounding level {level:.1e} of the residual)"
+            return state, None, *_rounding_limited(norms[-1], level, size, tolerance)
         return state, None, Status.STALLED, f"line search stalled at iteration {it}"
-    if taken <= xtol * (1.0 + problem.size(state)):
-        return state, taken, Status.SUCCESS, ""
     return state, taken, None, ""
+
+
+def _rounding_limited(norm: float, level: float, size: float, tolerance: float):
+    """Status and message when the residual is at its rounding level but the Newton
+    correction there — the estimate of the error left in the path — exceeds the
+    tolerance: never SUCCESS (issue 20). The correction is rounding noise amplified by
+    the conditioning of the Newton matrix, so its size is the attainable accuracy."""
+    return Status.ILL_CONDITIONED, (
+        f"the residual ({norm:.1e}) is at its rounding level ({level:.1e}), where the "
+        f"Newton correction, the estimated error of the path, is {size:.1e} > the "
+        f"tolerance xtol·(1 + size) = {tolerance:.1e}: rounding amplified by the Newton "
+        f"matrix's conditioning limits the attainable accuracy to about {size:.0e}; "
+        f"accept it with a larger xtol, or use fewer steps")
 
 
 def _rounding_level(ab: np.ndarray, bw: int, u: np.ndarray) -> float:
@@ -442,6 +473,26 @@ def _penalty(problem, path: Path, rows: np.ndarray, nu: float) -> float:
         return cost
     res, _, _, finite = problem.assemble(path, False)
     return cost + nu * float(np.abs(res[rows]).sum()) if finite else np.inf
+
+
+def _natural_step(problem, state, delta, ab, bw: int, size: float):
+    """The full Newton step from a residual at its rounding level, where the residual's
+    norm is noise and cannot judge it: taken when it passes Deuflhard's natural
+    monotonicity test (the correction the same Newton matrix gives at the new point is
+    smaller), else (state, None)."""
+    from scipy.linalg import LinAlgError
+
+    trial = problem.moved(state, delta, 1.0)
+    if trial is None:
+        return state, None
+    trial_res, _, _, finite = problem.assemble(trial, False)
+    try:
+        simplified = problem.solve(ab, bw, -trial_res) if finite else None
+    except LinAlgError:
+        simplified = None
+    if simplified is None or not float(np.abs(simplified).max(initial=0.0)) < size:
+        return state, None
+    return trial, size
 
 
 def _line_search(problem, state, delta, res, min_alpha: float = 2.0**-12):

@@ -53,6 +53,7 @@ class Status(enum.IntEnum):
     STALLED = 4
     OUTSIDE_CHART = 5
     DIVERGED = 6
+    ILL_CONDITIONED = 7
 
 
 class NewtonError(RuntimeError):

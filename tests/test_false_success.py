@@ -1,0 +1,57 @@
+"""A hunt for false successes of the whole-trajectory solve (issue 20, item 1).
+
+cubic_spline's discrete Euler–Lagrange equation is the fourth difference = 0, so the
+samples of a cubic are its exact discrete solution for any N. Before, N = 10⁵ from the
+chord guess returned SUCCESS after one iteration with a path 43 % away from the cubic,
+and N = 10⁴ SUCCESS 2e-7 away, accepted at the residual's "rounding level". Now a
+SUCCESS must be within the requested tolerance of the exact path, and everything else
+must say why it is not a success and what accuracy was reachable.
+"""
+from __future__ import annotations
+
+import re
+
+import numpy as np
+import pytest
+
+
+def cubic(t: np.ndarray) -> np.ndarray:
+    return np.stack([t**3 - 0.5 * t**2 + 0.2 * t, -(t**3) + t], axis=1)
+
+
+@pytest.mark.parametrize("N", [100, 1000, 10_000, 100_000])
+def test_no_false_success_on_the_exact_cubic(compiled, N):
+    mod, h, xtol = compiled("cubic_spline"), 1.0 / N, 1e-9   # the default
+    exact = cubic(h * np.arange(N + 1))
+    rng = np.random.default_rng(N)
+    guesses = {"cubic": "cubic", "chord": "chord",
+               "perturbed": exact[2:N - 1] + 1e-3 * rng.standard_normal((N - 3, 2))}
+    outcomes = {}
+    for label, guess in guesses.items():
+        result = mod.solve_bvp(exact[:2], exact[-2:], N, h, guess=guess)
+        error = float(np.abs(result.q - exact).max())
+        outcomes[label] = (result.status.name, error)
+        if result.success:
+            assert error <= xtol * (1.0 + np.abs(exact).max()), (label, error, result.message)
+        else:
+            assert result.status == mod.Status.ILL_CONDITIONED, (label, result.message)
+            reachable = float(re.search(r"attainable accuracy to about ([0-9.e+-]+)",
+                                        result.message).group(1))
+            # the reported accuracy is the size of the error actually left
+            assert reachable / 10 <= error <= 10 * reachable, (label, error, result.message)
+    print(f"\nN = {N}: {outcomes}")
+    if N <= 100:
+        assert all(status == "SUCCESS" for status, _ in outcomes.values()), outcomes
+
+
+def test_a_short_damped_step_is_not_convergence(compiled):
+    """A step cut by the line search can be shorter than xtol far from the solution;
+    only the full Newton correction may end the iteration with SUCCESS."""
+    mod, N = compiled("cubic_spline"), 50
+    h = 1.0 / N
+    exact = cubic(h * np.arange(N + 1))
+    result = mod.solve_bvp(exact[:2], exact[-2:], N, h, guess="chord", xtol=1e-3)
+    assert result.success
+    assert float(re.search(r"last Newton corrections [0-9.e+-]+, ([0-9.e+-]+)", result.message).group(1)) \
+        <= 1e-3 * (1.0 + np.abs(result.q).max())
+    assert np.abs(result.q - exact).max() <= 1e-3
