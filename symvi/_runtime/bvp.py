@@ -180,17 +180,18 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
         is at most xtol·(1 + size) in two iterations in a row (at the rounding level
         one correction can be small by cancellation), size the largest unknown, or
         when ‖R‖∞ ≤ ftol.
-        Where the residual reaches its rounding level first, a full step is taken only
-        if it passes Deuflhard's natural monotonicity test; a path whose correction
-        still exceeds the tolerance there is ``ILL_CONDITIONED``, never SUCCESS, and
-        the message gives the correction as the attainable accuracy (the Newton matrix
-        of a second-order problem has κ ∝ N⁴; cubic_spline: about 1e-10 at N = 10³,
-        1e-7 at 10⁴, 1e-4 at 10⁵, each within a factor 2–4 of the true error). The default of 100 iterations (SLSQP's) leaves room for
-        constrained problems started far from feasibility: the non-planar heavy top from
-        the chord guess takes 52–73. Optimal-control problems are globalised on their
-        cost (with constraints: its ℓ1 exact penalty S + ν‖Φ_d‖₁) with a shifted Hessian
-        and Armijo backtracking, other problems and the last steps by backtracking on
-        ‖R‖₂.
+        Where the residual reaches its rounding level first, its norm is noise: the
+        full step is taken if it passes Deuflhard's natural monotonicity test, else
+        the cost's descent step is tried; a path whose correction still exceeds the
+        tolerance there is ``ILL_CONDITIONED``, never SUCCESS, and the message gives
+        the correction as the attainable accuracy (the Newton matrix of a second-order
+        problem has κ ∝ N⁴; cubic_spline: about 1e-10 at N = 10³, 1e-7 at 10⁴, 1e-4
+        at 10⁵, each within a factor 2–4 of the true error). The default of 100
+        iterations (SLSQP's) leaves room for constrained problems started far from
+        feasibility: the non-planar heavy top from the chord guess takes 52–73.
+        Optimal-control problems are globalised on their cost (with constraints: its
+        ℓ1 exact penalty S + ν‖Φ_d‖₁) with a shifted Hessian and Armijo backtracking,
+        other problems and the last steps by backtracking on ‖R‖₂.
     raise_on_failure : raise :class:`NewtonError` (carrying the failed result and its
         iteration history) instead of returning a failed result.
     """
@@ -333,7 +334,8 @@ def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list,
                 f"; last Newton corrections {corrections[-2]:.1e}, {size:.1e}")
         if moved is not None:
             return moved, size, None, ""
-        taken = None
+        return state, None, Status.STALLED, (
+            f"the full Newton step leaves the retraction's chart at iteration {it}")
     else:
         taken = None
         if norms[-1] <= level:

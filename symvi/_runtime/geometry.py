@@ -24,34 +24,45 @@ def group_defect(g: np.ndarray, invariants: dict) -> tuple[float, str]:
     each relative to the size of the products it is computed from (so that an SE(n)
     translation, which no condition involves, does not hide a rotation's defect), and
     the condition it violates."""
+    values, conditions = group_defects(g[None], invariants)
+    worst = int(np.argmax(values[0])) if len(conditions) else 0
+    return (float(values[0, worst]), conditions[worst]) if len(conditions) else (0.0, "")
+
+
+def group_defects(gs: np.ndarray, invariants: dict) -> tuple[np.ndarray, list[str]]:
+    """Defects of the configurations ``gs`` (K, d, d), one column per condition (NaN
+    counted as infinite), and the conditions' descriptions; vectorised over the nodes,
+    since a guess may hold 10⁵ of them."""
     with np.errstate(all="ignore"):             # huge data: an infinite defect, refused
-        return _group_defect(g, invariants)
+        a, columns, conditions = np.abs(gs), [], []
+
+        def consider(defect: np.ndarray, size: np.ndarray, what: str) -> None:
+            value = _sizes(defect) / np.maximum(1.0, _sizes(size))
+            columns.append(np.where(np.isnan(value), np.inf, value))
+            conditions.append(what)
+
+        T = np.swapaxes(gs, 1, 2)
+        for J in map(np.asarray, invariants["quadratic"]):
+            consider(T @ J @ gs - J, np.swapaxes(a, 1, 2) @ np.abs(J) @ a,
+                     "gᵀJg = J (an invariant quadratic form)")
+        for K in map(np.asarray, invariants["coquadratic"]):
+            consider(gs @ K @ T - K, a @ np.abs(K) @ np.swapaxes(a, 1, 2),
+                     "gKgᵀ = K (orthogonality of the rotation block)")
+        for v in map(np.asarray, invariants["fixed"]):
+            consider(gs @ v - v, a @ np.abs(v), f"g v = v for v = {v.tolist()}")
+        for w in map(np.asarray, invariants["cofixed"]):
+            consider(w @ gs - w, np.abs(w) @ a, f"wᵀg = wᵀ for w = {w.tolist()} (the last row)")
+        det = np.linalg.det(gs)
+        columns.append(np.where(det > 0.0, 0.0, np.where(np.isfinite(det), 1.0 + np.abs(det),
+                                                           np.inf)))
+        conditions.append("det g > 0 (the group is connected; det g = {det:.6g})")
+    values = np.stack(columns, axis=1)
+    return values, [c.format(det=float(det[0])) if "{det" in c else c for c in conditions]
 
 
-def _group_defect(g: np.ndarray, invariants: dict) -> tuple[float, str]:
-    worst, which = 0.0, ""
-    a = np.abs(g)
-
-    def consider(defect: np.ndarray, size: np.ndarray, what: str) -> None:
-        nonlocal worst, which
-        value = _size(defect) / max(1.0, _size(size))
-        if not value <= worst:      # NaN-safe: a NaN defect is the worst
-            worst, which = value, what
-
-    for J in map(np.asarray, invariants["quadratic"]):
-        consider(g.T @ J @ g - J, a.T @ np.abs(J) @ a, "gᵀJg = J (an invariant quadratic form)")
-    for K in map(np.asarray, invariants["coquadratic"]):
-        consider(g @ K @ g.T - K, a @ np.abs(K) @ a.T,
-                 "gKgᵀ = K (orthogonality of the rotation block)")
-    for v in map(np.asarray, invariants["fixed"]):
-        consider(g @ v - v, a @ np.abs(v), f"g v = v for v = {v.tolist()}")
-    for w in map(np.asarray, invariants["cofixed"]):
-        consider(w @ g - w, np.abs(w) @ a, f"wᵀg = wᵀ for w = {w.tolist()} (the last row)")
-    det = float(np.linalg.det(g))
-    if not det > 0.0:
-        consider(np.array([1.0 + abs(det)]), np.ones(1),
-                 f"det g > 0 (det g = {det:.6g}; the group is connected)")
-    return worst, which
+def _sizes(a: np.ndarray) -> np.ndarray:
+    """Largest absolute entry of each node's array (first axis)."""
+    return np.abs(a).reshape(len(a), -1).max(axis=1, initial=0.0)
 
 
 def _size(a: np.ndarray) -> float:
@@ -63,14 +74,16 @@ def check_configurations(model, g: np.ndarray, what: str, first: int = 0) -> Non
     factor) is off its group; node numbers start at ``first``."""
     at = 0
     for d, group in zip(model.matrix_dims, model.info.get("groups", ())):
-        for k, flat in enumerate(g[:, at:at + d * d]):
-            defect, condition = group_defect(flat.reshape(d, d), group)
-            if not defect <= TOLERANCE:
-                raise ValueError(
-                    f"{what}: the configuration of node {first + k} is not on "
-                    f"{group['label']}: {condition} fails by {defect:.3e} (tolerance "
-                    f"{TOLERANCE:g}, relative); pass a configuration of the group "
-                    f"(re-orthonormalise the rotation, e.g. by its polar decomposition)")
+        gs = g[:, at:at + d * d].reshape(-1, d, d)
+        bad = np.flatnonzero(~(group_defects(gs, group)[0].max(axis=1, initial=0.0) <= TOLERANCE))
+        if bad.size:
+            k = int(bad[0])
+            defect, condition = group_defect(gs[k], group)
+            raise ValueError(
+                f"{what}: the configuration of node {first + k} is not on "
+                f"{group['label']}: {condition} fails by {defect:.3e} (tolerance "
+                f"{TOLERANCE:g}, relative); pass a configuration of the group "
+                f"(re-orthonormalise the rotation, e.g. by its polar decomposition)")
         at += d * d
 
 
