@@ -37,7 +37,7 @@ def feasible_system(mod, n_steps: int):
     h = ex.n_steps * ex.h / n_steps
     x, g = top_path(name, dict(zip(mod.model.parameter_names, p)), n_steps, h)
     path = path_through(mod, x, g, h)
-    problem = runtime_of(mod, "bvp")._Problem(mod.model, p, h)
+    problem = runtime_of(mod, "assembly").Problem(mod.model, p, h)
     res, ab, bw, finite = problem.assemble(path, True)
     assert finite and np.abs(res[problem.constraint_rows(path)]).max() < 1e-10   # feasible
     return problem, path, res, ab, bw

@@ -138,7 +138,7 @@ def tangent_curvatures(mod, result, h: float) -> np.ndarray:
     whose rows are the identity."""
     path = path_through(mod, result.x, result.g, h)
     path.lam[:] = result.multipliers
-    problem = runtime_of(mod, "bvp")._Problem(mod.model, mod.model.params(None), h)
+    problem = runtime_of(mod, "assembly").Problem(mod.model, mod.model.params(None), h)
     J = dense_jacobian(*problem.assemble(path, True)[1:3])
     rows, n = problem.constraint_rows(path), mod.model.n
     free = ~rows

@@ -1,11 +1,12 @@
 """Whole-trajectory solve: Newton on all free nodes at once (DESIGN.md §4).
 
-The residual at node j involves nodes j−r … j+r, so the Jacobian is block-banded; C
-assembles it in LAPACK's band storage and ``dgbsv`` factorises it, so one iteration costs
-O(N). The unknowns are corrections η_j of the free nodes, applied as the
-node variation g → g·τ(η) (pair groupoid: q_j += η_j; matrix groups: g_j ← g_j τ(η_j),
-which keeps the product of the increments equal to g_0⁻¹g_N), and, with constraints, the
-multipliers λ^k of every window (paper §3.2, eq. ``constrainedso``).
+The Newton loop and what it concludes. The unknowns are corrections η_j of the free
+nodes, applied as the node variation g → g·τ(η) (pair groupoid: q_j += η_j; matrix
+groups: g_j ← g_j τ(η_j), which keeps the product of the increments equal to g_0⁻¹g_N),
+and, with constraints, the multipliers λ^k of every window (paper §3.2, eq.
+``constrainedso``). Beside it: :mod:`.assembly` (the banded system, its solves and
+updates), :mod:`.globalisation` (descent, natural and backtracking steps) and
+:mod:`.optimality` (the second-order test and the inertia correction).
 """
 from __future__ import annotations
 
@@ -14,146 +15,13 @@ from dataclasses import replace
 import numpy as np
 
 from . import arguments
-from .gauge import Gauge, check_boundary
+from .assembly import Problem, band_product
+from .gauge import check_boundary
+from .globalisation import descent_step, line_search, natural_step
+from .optimality import second_order
 from .paths import Path, initial_path
 from .results import BVPResult, Status
 from .storage import check_path_memory as check_memory
-
-
-class _Problem:
-    """Newton's view of a path: residuals, banded Jacobian and updates, all in C.
-
-    An update composes each group fibre exactly, τ(hξ') = τ(−η_k) τ(hξ) τ(η_{k+1}), in
-    increment-minus-identity arithmetic: recomputing ξ from the configurations instead
-    would round it to ε/h, which the fourth-order structure of a second-order residual
-    amplifies into O(1) errors of the slowest modes at N = 10⁵.
-    """
-
-    def __init__(self, model, p, h):
-        self.model, self.p, self.h = model, p, h
-        #: An optimal-control problem minimises its cost: Newton steps are then globalised
-        #: on the cost itself, or with constraints on its ℓ1 exact penalty (see
-        #: :func:`_descent_step`).
-        self.minimise = bool(model.info.get("controls"))
-        self.shift, self.penalty = 0.0, 0.0
-        self._band = self._work = None   # reused: fresh pages are slow to touch at large N
-        self.gauge = None
-
-    def merit(self, path: Path) -> tuple[float, float]:
-        """The cost S = Σ L_d and the size of its rounding error."""
-        terms = self.model.along_vector("lagrangian", path.x, path.f, self.h, self.p)
-        return float(terms.sum()), float(np.abs(terms).sum()) * 64 * np.finfo(float).eps
-
-    def assemble(self, path: Path, with_jacobian: bool):
-        m, n_nodes = self.model, path.x.shape[0]
-        unknown = int(m.lib.symvi_bvp_unknowns(n_nodes))
-        bw = int(m.lib.symvi_bvp_bandwidth())
-        res, ab = np.zeros(unknown), None
-        if with_jacobian:
-            if self._band is None or self._band.shape != (3 * bw + 1, unknown):
-                self._band = np.zeros((3 * bw + 1, unknown), order="F")
-                self._work = np.zeros_like(self._band, order="F")
-            ab = self._band
-        code = m.lib.symvi_bvp_assemble(m.ptr(path.x), m.ptr(path.f), m.ptr(path.lam), n_nodes,
-                                        m.ptr(self.p), self.h, m.ptr(res),
-                                        m.ptr(ab.T) if with_jacobian else m.ffi.NULL)
-        if with_jacobian and m.info.get("gauges"):
-            if self.gauge is None:
-                self.gauge = Gauge(m, n_nodes)
-            self.gauge.update(path, self.p, self.h)
-        return res, ab, bw, code == 0
-
-    def solve(self, ab, bw: int, rhs: np.ndarray, shift: float = 0.0,
-              shifted: np.ndarray | None = None) -> np.ndarray:
-        """Solve (J + shift·D) x = rhs with LAPACK's banded LU (dgbsv), J in the band
-        storage of :meth:`assemble` (left intact: the work copy is factorised), D the
-        identity on the unknowns ``shifted`` (a mask; default all). Exactly dependent
-        constraints are replaced by their gauge condition (:mod:`.gauge`)."""
-        from scipy.linalg import LinAlgError
-        from scipy.linalg.lapack import dgbsv
-
-        rhs = self._newton_matrix(ab, bw, rhs, shift, shifted)
-        _, _, x, info = dgbsv(bw, bw, self._work, rhs, overwrite_ab=True)
-        if info != 0:
-            raise LinAlgError(f"dgbsv: singular at column {info}" if info > 0 else "dgbsv")
-        return x
-
-    def reciprocal_condition(self, ab, bw: int) -> float:
-        """LAPACK's estimate (dgbcon, 1-norm) of 1/κ of the Newton matrix of :meth:`solve`
-        without shift: below ε rounding may dominate its solves."""
-        from scipy.linalg.lapack import dgbcon, dgbtrf
-
-        self._newton_matrix(ab, bw, np.zeros(self._work.shape[1]))
-        norm = float(np.abs(self._work[bw:]).sum(axis=0).max(initial=0.0))
-        lu, pivots, info = dgbtrf(self._work, bw, bw, overwrite_ab=True)
-        return 0.0 if info != 0 else float(dgbcon(bw, bw, lu, pivots, norm)[0])
-
-    def _newton_matrix(self, ab, bw: int, rhs: np.ndarray, shift: float = 0.0,
-                       shifted: np.ndarray | None = None) -> np.ndarray:
-        """Fill the work band with the matrix :meth:`solve` factorises (J, its shift, the
-        gauge rows); returns the matching right-hand side."""
-        np.copyto(self._work, ab)
-        if shift:
-            self._work[2 * bw] += shift if shifted is None else shift * shifted
-        return rhs if self.gauge is None else self.gauge.apply(self._work, bw, rhs)
-
-    def moved(self, path: Path, delta, alpha):
-        m, trial = self.model, path.copy()
-        failed = m.ffi.new("long *")
-        code = m.lib.symvi_bvp_update(m.ptr(trial.x), m.ptr(trial.g), m.ptr(trial.f),
-                                      m.ptr(trial.lam), m.ptr(delta), alpha, path.x.shape[0],
-                                      m.ptr(self.p), self.h, failed)
-        return trial if code == 0 else None
-
-    def perturbed(self, path: Path) -> Path:
-        """``path`` with every free node moved by a fixed pseudo-random variation of size
-        1e-2 (its ends kept): a second path between the same ends."""
-        r, blocks = self.model.order, self._blocks(path)
-        delta = 1e-2 * np.random.default_rng(0).uniform(-1.0, 1.0, (len(blocks), self.model.n
-                                                                     + self.model.constraints))
-        delta[(blocks < r) | (blocks > path.x.shape[0] - 1 - r)] = 0.0
-        moved = self.moved(path, delta.reshape(-1), 1.0)
-        if moved is None:
-            raise ValueError("cannot vary the initial path to check the declared symmetries")
-        return moved
-
-    def size(self, path: Path) -> float:
-        """Scale of the unknowns for the relative step tolerance."""
-        floor = 1.0 if self.model.matrix_dims else 0.0
-        return max(floor, float(np.abs(path.x).max(initial=0.0)),
-                   float(np.abs(path.lam).max(initial=0.0)))
-
-    def _blocks(self, path: Path) -> np.ndarray:
-        """The nodes of the C assembler's blocks: each holds a node correction η_t (n
-        unknowns, its residual rows) and, with constraints, the multipliers of window
-        t − 1 (s unknowns, the rows of its constraints Φ_d)."""
-        r, s = self.model.order, self.model.constraints
-        t0 = r - 1 if s else r
-        return np.arange(t0, path.x.shape[0] - t0)
-
-    def constraint_rows(self, path: Path) -> np.ndarray:
-        """Mask of the multiplier unknowns (= constraint rows) in the block layout."""
-        n, s = self.model.n, self.model.constraints
-        return np.tile(np.r_[np.zeros(n, bool), np.ones(s, bool)], len(self._blocks(path)))
-
-    def multipliers(self, path: Path) -> np.ndarray:
-        """The multipliers λ in the block layout (their rows of :meth:`constraint_rows`)."""
-        if not self.model.constraints:
-            return np.zeros(0)
-        return path.lam[self._blocks(path) - 1].reshape(-1)
-
-    def magnitudes(self, path: Path) -> np.ndarray:
-        """Magnitude of every unknown, in the block layout of the C assembler: a node
-        correction is as precise as the fibres meeting there (a group fibre is held as
-        its increment hξ, a pair fibre is the node itself), a multiplier as itself."""
-        m, s = self.model, self.model.constraints
-        blocks = self._blocks(path)
-        scaled = np.array(m.info.get("step_scaled") or [False] * m.n, dtype=bool)
-        before = np.abs(path.f[np.maximum(blocks - 1, 0)])
-        after = np.abs(path.f[np.minimum(blocks, path.f.shape[0] - 1)])
-        eta = np.where(scaled, self.h * np.maximum(before, after), before)
-        lam = np.abs(path.lam[blocks - 1]) if s else np.zeros((len(blocks), 0))
-        return np.concatenate([eta, lam], axis=1).reshape(-1)
 
 
 def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=None,
@@ -174,7 +42,10 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
         positions (in τ-coordinates at g_{r−1} on groups, the base points moved along;
         the chord when r = 1, as there are no end velocities), and
         ``"chord"`` the positions only: g_{r−1} τ(s·τ⁻¹(g_{r−1}⁻¹ g_{N−r+1})).
-        Multipliers start at zero.
+        Multipliers start at zero. Or a previous :class:`BVPResult` with the same
+        number of steps (a warm start: other boundary data, other parameters, a
+        continuation): its free nodes, its multipliers, and its fibres where both nodes
+        are unchanged.
     maxiter, xtol, ftol : SUCCESS when the full Newton correction ‖Δ‖∞ — the estimate
         of the error left in the path (unknowns: node corrections and multipliers) —
         is at most xtol·(1 + size) in two iterations in a row (at the rounding level
@@ -210,10 +81,12 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
     path = initial_path(model, start, end, N, guess, p, h)
     if isinstance(path, BVPResult):
         return path.raise_for_status() if raise_on_failure else path
-    problem = _Problem(model, p, h)
+    problem = Problem(model, p, h)
     if info.get("gauges"):
         check_boundary(model, path, problem.perturbed(path), p, h)
     path, norms, steps, status, message = _newton(problem, path, maxiter, xtol, ftol)
+    if status == Status.SUCCESS and problem.minimise:
+        status, message = _minimum(problem, path, message)
     if status == Status.SUCCESS:
         message = (f"converged in {len(steps)} Newton iterations, residual norm "
                    f"{norms[-1]:.3e}{message}")
@@ -224,6 +97,21 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
         step_norms=np.array(steps), status=status, message=message))
     result = _finite(result)
     return result.raise_for_status() if raise_on_failure else result
+
+
+def _minimum(problem: Problem, path: Path, message: str) -> tuple[Status, str]:
+    """An optimal-control solve is a SUCCESS only at a minimum: the second-order test
+    (:func:`.optimality.second_order`) on the converged path, else SADDLE."""
+    _, ab, bw, finite = problem.assemble(path, True)
+    verdict = second_order(ab, bw, problem.constraint_rows(path)) if finite else None
+    if verdict is not None and verdict.minimum:
+        return Status.SUCCESS, message
+    pivot = "" if verdict is None else (
+        f" (Cholesky pivot {verdict.pivot:.1e} of W + ρAᵀA at ρ = {verdict.rho:.1e})")
+    return Status.SADDLE, (
+        f"converged to a stationary point of the cost{message}, but not to a verified "
+        f"minimum: the Hessian of the Lagrangian is not positive definite on the "
+        f"constraints' tangent space{pivot} — a saddle or maximum; start from another guess")
 
 
 def _finite(result: BVPResult) -> BVPResult:
@@ -242,7 +130,7 @@ def _finite(result: BVPResult) -> BVPResult:
     return result
 
 
-def _conditioning(problem: _Problem, path: Path, status: Status) -> str:
+def _conditioning(problem: Problem, path: Path, status: Status) -> str:
     """Why Newton failed, when the reason is double precision itself: the Newton matrix
     at the returned path is singular to working precision (1/κ < ε). Its conditioning
     grows like N^{2r} (differences of order 2r), so a large N can exhaust it — then
@@ -339,11 +227,11 @@ def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list,
     else:
         taken = None
         if norms[-1] <= level:
-            state, taken = _natural_step(problem, state, delta, ab, bw, size)
+            state, taken = natural_step(problem, state, delta, ab, bw, size)
         if taken is None and problem.minimise:
-            state, taken = _descent_step(problem, state, res, ab, bw, delta)
+            state, taken = descent_step(problem, state, res, ab, bw, delta)
         if taken is None and norms[-1] > level:
-            state, taken = _line_search(problem, state, delta, res)
+            state, taken = line_search(problem, state, delta, res)
     if taken is None:
         if norms[-1] <= level:  # no descent left below the rounding level
             return state, None, *_rounding_limited(norms[-1], level, size, tolerance)
@@ -372,140 +260,5 @@ def _rounding_level(ab: np.ndarray, bw: int, u: np.ndarray) -> float:
     as far as floating point allows, even if its update, amplified by the condition
     number (∝ N⁴ for fourth differences), still exceeds xtol.
     """
-    scale = _band_product(np.abs(ab), bw, u)
+    scale = band_product(np.abs(ab), bw, u)
     return 16 * np.finfo(float).eps * float(scale.max(initial=0.0))
-
-
-def _band_product(ab: np.ndarray, bw: int, u: np.ndarray) -> np.ndarray:
-    """J u, J given by its 2 bw + 1 diagonals, ab[bw + row − col, col] = J[row, col]."""
-    out = np.zeros_like(u)
-    for d in range(2 * bw + 1):
-        offset = d - bw  # row = column + offset
-        if abs(offset) >= u.size:       # a band wider than the matrix (few unknowns)
-            continue
-        if offset >= 0:
-            out[offset:] += ab[d, : u.size - offset] * u[: u.size - offset]
-        else:
-            out[:offset] += ab[d, -offset:] * u[-offset:]
-    return out
-
-
-def _curvature(ab: np.ndarray, bw: int, delta: np.ndarray, nodes: np.ndarray,
-               shift: float) -> float:
-    """d_ηᵀ (W + shift·I) d_η, W = ∂R_η/∂η the node block of the Jacobian (the Hessian of
-    S + λ·Φ_d), d_η the node part of ``delta``; ``ab`` in the band storage of
-    :meth:`_Problem.assemble`."""
-    d = np.where(nodes, delta, 0.0)
-    return float(d @ _band_product(ab[bw:], bw, d)) + shift * float(d @ d)
-
-
-def _descent_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0**-12):
-    """A descent step on the cost S = Σ L_d, or with constraints Φ_d on its ℓ1 exact
-    penalty φ = S + ν‖Φ_d‖₁ (Nocedal & Wright §18.3, ν above the largest new multiplier).
-    ν may fall again, halfway per iteration (Powell's rule): far from feasibility the
-    first Newton steps can carry multipliers orders of magnitude above the solution's,
-    and a ν that only grew would leave φ blind to S (heavy top, rest to rest over a
-    vertical turn of 0.3 rad: no convergence in 300 iterations; with the rule, 208).
-
-    The Newton (SQP) step keeps J_Φ d = −Φ_d, so φ's slope along it is
-    R_η·d + λ·Φ_d − ν‖Φ_d‖₁ with R_η the node rows of the residual. When that is not
-    negative, or with constraints the Hessian W = ∂R_η/∂η of S + λ·Φ_d has no positive
-    curvature along the step's node part (d_ηᵀ W d_η ≤ 0), the node block is shifted by
-    μ·max|diag| (Nocedal & Wright §3.4) until both hold; then Armijo backtracking on φ.
-    μ shrinks again after full steps. While ν‖Φ_d‖₁ is large the slope is blind to W:
-    steps into its negative curvature pass, are cut to α ≈ 2⁻⁸, and Newton settles on a
-    saddle of S on the constraints (the 0.3 rad turn: 208 iterations to a KKT point with
-    curvature −4.6 on the constraints' tangent space; with the test, 26–28 to a minimum of
-    lower cost). This is the curvature test of inertia-free line searches (Chiang &
-    Zavala 2016), standing in for the inertia of a symmetric indefinite factorisation,
-    which LAPACK lacks for band matrices; it cannot exclude a saddle approached along
-    positive curvature. Far from a minimum it keeps Newton away from saddles and maxima
-    of S, where the residual-norm merit is content to go.
-
-    Returns (state, None) when φ cannot resolve the step (near convergence, the predicted
-    change is below its rounding level) or no shift helps; a step that climbs φ is
-    shifted, never handed back, since the residual-norm line search would then climb S.
-    """
-    from scipy.linalg import LinAlgError
-
-    rows = problem.constraint_rows(state)
-    nodes, lam, phi_d = ~rows, problem.multipliers(state), res[rows]
-    infeasibility = float(np.abs(phi_d).sum())
-
-    previous = problem.penalty
-
-    def slope(delta):
-        """φ's slope along ``delta``, after setting ν by Powell's rule (1978):
-        ν = max(ν̂, (ν_previous + ν̂)/2), ν̂ = 1.5 max|λ + Δλ|."""
-        if rows.any():
-            wanted = 1.5 * float(np.abs(lam + delta[rows]).max(initial=0.0))
-            problem.penalty = max(wanted, 0.5 * (previous + wanted))
-        return float(res[nodes] @ delta[nodes] + lam @ phi_d) - problem.penalty * infeasibility
-
-    cost, noise = problem.merit(state)
-    if abs(slope(delta)) <= noise * (1 + problem.penalty):
-        return state, None
-    scale, shift = float(np.abs(ab[2 * bw][nodes]).max(initial=0.0)), problem.shift
-    while shift <= 1e3:
-        if shift > 0.0:
-            try:
-                delta = problem.solve(ab, bw, -res, shift * scale, nodes)
-            except LinAlgError:         # this shift makes the matrix singular: the next
-                shift = max(10 * shift, 1e-8)
-                continue
-        descent, nu, alpha = slope(delta), problem.penalty, 1.0
-        if rows.any() and _curvature(ab, bw, delta, nodes, shift * scale) <= 0.0:
-            descent = 0.0       # into W's negative curvature: shift instead
-        while descent < 0.0 and alpha >= min_alpha:
-            trial = problem.moved(state, delta, alpha)
-            if trial is not None and _penalty(problem, trial, rows, nu) \
-                    <= cost + nu * infeasibility + 1e-4 * alpha * descent:
-                problem.shift = shift / 10 if alpha == 1.0 and shift > 1e-10 else \
-                    (0.0 if alpha == 1.0 else shift)
-                return trial, alpha * float(np.abs(delta).max(initial=0.0))
-            alpha /= 2
-        shift = max(10 * shift, 1e-8)
-    return state, None
-
-
-def _penalty(problem, path: Path, rows: np.ndarray, nu: float) -> float:
-    """φ = S + ν‖Φ_d‖₁ at ``path`` (S alone without constraints)."""
-    cost = problem.merit(path)[0]
-    if not rows.any():
-        return cost
-    res, _, _, finite = problem.assemble(path, False)
-    return cost + nu * float(np.abs(res[rows]).sum()) if finite else np.inf
-
-
-def _natural_step(problem, state, delta, ab, bw: int, size: float):
-    """The full Newton step from a residual at its rounding level, where the residual's
-    norm is noise and cannot judge it: taken when it passes Deuflhard's natural
-    monotonicity test (the correction the same Newton matrix gives at the new point is
-    smaller), else (state, None)."""
-    from scipy.linalg import LinAlgError
-
-    trial = problem.moved(state, delta, 1.0)
-    if trial is None:
-        return state, None
-    trial_res, _, _, finite = problem.assemble(trial, False)
-    try:
-        simplified = problem.solve(ab, bw, -trial_res) if finite else None
-    except LinAlgError:
-        simplified = None
-    if simplified is None or not float(np.abs(simplified).max(initial=0.0)) < size:
-        return state, None
-    return trial, size
-
-
-def _line_search(problem, state, delta, res, min_alpha: float = 2.0**-12):
-    """Backtrack α = 1, ½, … until ‖R‖₂ decreases (Armijo, c = 1e-4)."""
-    base = float(np.dot(res, res))
-    alpha = 1.0
-    while alpha >= min_alpha:
-        trial = problem.moved(state, delta, alpha)
-        if trial is not None:
-            trial_res, _, _, finite = problem.assemble(trial, False)
-            if finite and float(np.dot(trial_res, trial_res)) <= (1 - 1e-4 * alpha) * base:
-                return trial, alpha * float(np.abs(delta).max(initial=0.0))
-        alpha /= 2
-    return state, None

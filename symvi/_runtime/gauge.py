@@ -31,7 +31,7 @@ class Gauge:
         self.window = (n_nodes - 2) // 2
         n, s = model.n, model.constraints
         # window w's multipliers and constraint rows sit in block w + 1 of the layout
-        # (the first block is node 1's, see bvp._Problem._blocks)
+        # (the first block is node 1's, see assembly.Problem._blocks)
         self.rows = np.arange(s) + self.window * (n + s) + n
         self.projector = self.basis = self.lam = None
 
@@ -45,9 +45,13 @@ class Gauge:
         self.projector = np.eye(s) - self.basis @ self.basis.T
         self.lam = path.lam[w].copy()
 
-    def apply(self, band: np.ndarray, bw: int, rhs: np.ndarray) -> np.ndarray:
+    def apply(self, band: np.ndarray, bw: int, rhs: np.ndarray,
+              lam: np.ndarray | None = None) -> np.ndarray:
         """Replace window w's rows of the Newton system, J in LAPACK band storage
-        (band[2 bw + row − col, col] = J[row, col]) in place; returns the new rhs."""
+        (band[2 bw + row − col, col] = J[row, col]) in place; returns the new rhs. ``lam``:
+        the multipliers λ^w of the path the correction starts from, when that is not the
+        point of :meth:`update` (a simplified Newton correction at a trial point: with the
+        old λ^w it would repeat the gauge component of the step just taken)."""
         rows, size = self.rows, band.shape[1]
         cols = np.arange(max(0, rows[0] - bw), min(size, rows[-1] + bw + 1))
         I, C = np.meshgrid(rows, cols, indexing="ij")
@@ -61,7 +65,8 @@ class Gauge:
                                "window have different supports")
         band[diag[inside], C[inside]] = new[inside]
         rhs = rhs.copy()
-        rhs[rows] = self.projector @ rhs[rows] - self.basis @ (self.basis.T @ self.lam)
+        lam = self.lam if lam is None else lam
+        rhs[rows] = self.projector @ rhs[rows] - self.basis @ (self.basis.T @ lam)
         return rhs
 
 

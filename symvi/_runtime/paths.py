@@ -132,6 +132,9 @@ def initial_path(model, start, end, N: int, guess, p, h):
     sx, sg = nodes(model, start, r, "start")
     ex, eg = nodes(model, end, r, "end", N - r + 1)
     count = N + 1 - 2 * r
+    previous = guess if isinstance(guess, BVPResult) else None
+    if previous is not None:
+        guess = _free_nodes(model, previous, N)
     if guess is None or isinstance(guess, str):
         interpolated = _interpolated(model, (sx, sg), (ex, eg), count, guess or "cubic", p)
         if isinstance(interpolated, BVPResult):
@@ -144,9 +147,44 @@ def initial_path(model, start, end, N: int, guess, p, h):
     f = fibres(model, x, g, p, h, lambda k: f"the initial path: w_{k} = g_{k}⁻¹ g_{k + 1}")
     if isinstance(f, BVPResult):
         return f
-    check_consistent(model, x, f, p, h, "boundary data or guess")
     windows = N + 1 - r if model.constraints else 0
-    return Path(x, g, f, np.zeros((windows, model.constraints)))
+    lam = np.zeros((windows, model.constraints))
+    if previous is not None:
+        f, lam = _kept(model, previous, x, g, f, lam)
+    check_consistent(model, x, f, p, h, "boundary data or guess")
+    return Path(x, g, f, lam)
+
+
+def _free_nodes(model, previous: BVPResult, N: int):
+    """The free nodes r … N−r of a previous solve, in the layout of ``guess``: a warm start
+    (the same problem with other boundary data or parameters, or a continuation)."""
+    steps = previous.t.size - 1
+    if previous.f is None or steps != N:
+        raise ValueError(f"guess: a previous result warm-starts a solve with its own number "
+                         f"of steps ({max(steps, 0)}), not n_steps = {N}"
+                         + ("" if previous.f is not None else " (it holds no path)"))
+    free = slice(model.order, N + 1 - model.order)
+    g = previous.g
+    g = None if g is None else (g[free] if not isinstance(g, tuple) else tuple(b[free] for b in g))
+    if not model.matrix_dims:
+        return previous.x[free]
+    return g if model.m == 0 else (previous.x[free], g)
+
+
+def _kept(model, previous: BVPResult, x, g, f, lam):
+    """The previous solve's fibres on the elements whose nodes are unchanged (recomputed
+    from the nodes, a group fibre would be rounded to ε/h) and its multipliers."""
+    old_x = previous.x if previous.x is not None else np.zeros((x.shape[0], 0))
+    old_g = previous.g if previous.g is not None else np.zeros((x.shape[0], 0))
+    old_g = np.concatenate([b.reshape(x.shape[0], -1) for b in old_g], axis=1) \
+        if isinstance(old_g, tuple) else old_g.reshape(x.shape[0], -1)
+    same = (x == old_x).all(axis=1) & (g == old_g).all(axis=1)
+    if previous.f.shape == f.shape:
+        keep = same[:-1] & same[1:]
+        f = np.where(keep[:, None], previous.f, f)
+    if previous.multipliers is not None and previous.multipliers.shape == lam.shape:
+        lam = np.array(previous.multipliers, dtype=float)
+    return np.ascontiguousarray(f), lam
 
 
 GUESSES = ("cubic", "chord")

@@ -54,6 +54,10 @@ class Status(enum.IntEnum):
     OUTSIDE_CHART = 5
     DIVERGED = 6
     ILL_CONDITIONED = 7
+    #: A KKT point of an optimal-control problem that is not a verified minimum (the
+    #: Hessian of the Lagrangian is not positive definite on the constraints' tangent
+    #: space): a saddle or maximum of the cost (:mod:`.optimality`).
+    SADDLE = 8
 
 
 class NewtonError(RuntimeError):

@@ -1,0 +1,182 @@
+"""Banded assembly of the whole-trajectory Newton system (DESIGN.md §4).
+
+The residual at node j involves nodes j−r … j+r, so the Jacobian is block-banded: C
+assembles it in LAPACK's band storage (ab[2 bw + row − col, col] = J[row, col]) and
+``dgbsv`` factorises it, so one iteration costs O(N). The unknowns are corrections η_j of
+the free nodes, applied as the node variation g → g·τ(η), and with constraints the
+multipliers λ^k of every window (paper §3.2, eq. ``constrainedso``), interleaved per node.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .gauge import Gauge
+from .paths import Path
+
+
+class Problem:
+    """Newton's view of a path: residuals, banded Jacobian and updates, all in C.
+
+    An update composes each group fibre exactly, τ(hξ') = τ(−η_k) τ(hξ) τ(η_{k+1}), in
+    increment-minus-identity arithmetic: recomputing ξ from the configurations instead
+    would round it to ε/h, which the fourth-order structure of a second-order residual
+    amplifies into O(1) errors of the slowest modes at N = 10⁵.
+    """
+
+    def __init__(self, model, p, h):
+        self.model, self.p, self.h = model, p, h
+        #: An optimal-control problem minimises its cost: Newton steps are then globalised
+        #: on the cost itself, or with constraints on its ℓ1 exact penalty (see
+        #: :func:`.globalisation.descent_step`).
+        self.minimise = bool(model.info.get("controls"))
+        self.shift, self.penalty = 0.0, 0.0
+        self._band = self._work = None   # reused: fresh pages are slow to touch at large N
+        self.gauge = None
+
+    def merit(self, path: Path) -> tuple[float, float]:
+        """The cost S = Σ L_d and the size of its rounding error."""
+        terms = self.model.along_vector("lagrangian", path.x, path.f, self.h, self.p)
+        return float(terms.sum()), float(np.abs(terms).sum()) * 64 * np.finfo(float).eps
+
+    def assemble(self, path: Path, with_jacobian: bool):
+        m, n_nodes = self.model, path.x.shape[0]
+        unknown = int(m.lib.symvi_bvp_unknowns(n_nodes))
+        bw = int(m.lib.symvi_bvp_bandwidth())
+        res, ab = np.zeros(unknown), None
+        if with_jacobian:
+            if self._band is None or self._band.shape != (3 * bw + 1, unknown):
+                self._band = np.zeros((3 * bw + 1, unknown), order="F")
+                self._work = np.zeros_like(self._band, order="F")
+            ab = self._band
+        code = m.lib.symvi_bvp_assemble(m.ptr(path.x), m.ptr(path.f), m.ptr(path.lam), n_nodes,
+                                        m.ptr(self.p), self.h, m.ptr(res),
+                                        m.ptr(ab.T) if with_jacobian else m.ffi.NULL)
+        if with_jacobian and m.info.get("gauges"):
+            if self.gauge is None:
+                self.gauge = Gauge(m, n_nodes)
+            self.gauge.update(path, self.p, self.h)
+        return res, ab, bw, code == 0
+
+    def solve(self, ab, bw: int, rhs: np.ndarray, shift: float = 0.0,
+              shifted: np.ndarray | None = None, at: Path | None = None) -> np.ndarray:
+        """Solve (J + shift·D) x = rhs with LAPACK's banded LU (dgbsv), J in the band
+        storage of :meth:`assemble` (left intact: the work copy is factorised), D the
+        identity on the unknowns ``shifted`` (a mask; default all). Exactly dependent
+        constraints are replaced by their gauge condition (:mod:`.gauge`), posed at the
+        path ``at`` (default: where J was assembled)."""
+        from scipy.linalg import LinAlgError
+        from scipy.linalg.lapack import dgbsv
+
+        rhs = self._newton_matrix(ab, bw, rhs, shift, shifted, at)
+        _, _, x, info = dgbsv(bw, bw, self._work, rhs, overwrite_ab=True)
+        if info != 0:
+            raise LinAlgError(f"dgbsv: singular at column {info}" if info > 0 else "dgbsv")
+        return x
+
+    def reciprocal_condition(self, ab, bw: int) -> float:
+        """An estimate of 1/κ₁ of the Newton matrix of :meth:`solve` without shift: below ε
+        rounding may dominate its solves. ‖J⁻¹‖₁ by Higham and Tisseur's block estimator
+        (SciPy's ``onenormest``) on solves with the banded LU, O(N) — LAPACK's dgbcon
+        rescans the vector in every column of an ill-conditioned factor, O(N²): 90 s at
+        N = 10⁵."""
+        from scipy.linalg.lapack import dgbtrf, dgbtrs
+        from scipy.sparse.linalg import LinearOperator, onenormest
+
+        self._newton_matrix(ab, bw, np.zeros(self._work.shape[1]))
+        norm = float(np.abs(self._work[bw:]).sum(axis=0).max(initial=0.0))
+        lu, pivots, info = dgbtrf(self._work, bw, bw, overwrite_ab=True)
+        if info != 0 or norm == 0.0:
+            return 0.0
+        size = lu.shape[1]
+
+        def solve(v, trans=0):
+            return dgbtrs(lu, bw, bw, np.asarray(v, dtype=float), pivots, trans=trans)[0]
+        inverse = LinearOperator((size, size), matvec=solve, rmatvec=lambda v: solve(v, 1),
+                                 dtype=float)
+        estimate = onenormest(inverse, t=8) if size > 16 else float(np.abs(
+            np.column_stack([solve(e) for e in np.eye(size)])).sum(axis=0).max())
+        return 1.0 / (norm * estimate) if np.isfinite(estimate) and estimate > 0 else 0.0
+
+    def _newton_matrix(self, ab, bw: int, rhs: np.ndarray, shift: float = 0.0,
+                       shifted: np.ndarray | None = None, at: Path | None = None) -> np.ndarray:
+        """Fill the work band with the matrix :meth:`solve` factorises (J, its shift, the
+        gauge rows); returns the matching right-hand side."""
+        np.copyto(self._work, ab)
+        if shift:
+            self._work[2 * bw] += shift if shifted is None else shift * shifted
+        if self.gauge is None:
+            return rhs
+        lam = None if at is None else at.lam[self.gauge.window]
+        return self.gauge.apply(self._work, bw, rhs, lam)
+
+    def moved(self, path: Path, delta, alpha):
+        m, trial = self.model, path.copy()
+        failed = m.ffi.new("long *")
+        code = m.lib.symvi_bvp_update(m.ptr(trial.x), m.ptr(trial.g), m.ptr(trial.f),
+                                      m.ptr(trial.lam), m.ptr(delta), alpha, path.x.shape[0],
+                                      m.ptr(self.p), self.h, failed)
+        return trial if code == 0 else None
+
+    def perturbed(self, path: Path) -> Path:
+        """``path`` with every free node moved by a fixed pseudo-random variation of size
+        1e-2 (its ends kept): a second path between the same ends."""
+        r, blocks = self.model.order, self._blocks(path)
+        delta = 1e-2 * np.random.default_rng(0).uniform(-1.0, 1.0, (len(blocks), self.model.n
+                                                                     + self.model.constraints))
+        delta[(blocks < r) | (blocks > path.x.shape[0] - 1 - r)] = 0.0
+        moved = self.moved(path, delta.reshape(-1), 1.0)
+        if moved is None:
+            raise ValueError("cannot vary the initial path to check the declared symmetries")
+        return moved
+
+    def size(self, path: Path) -> float:
+        """Scale of the unknowns for the relative step tolerance."""
+        floor = 1.0 if self.model.matrix_dims else 0.0
+        return max(floor, float(np.abs(path.x).max(initial=0.0)),
+                   float(np.abs(path.lam).max(initial=0.0)))
+
+    def _blocks(self, path: Path) -> np.ndarray:
+        """The nodes of the C assembler's blocks: each holds a node correction η_t (n
+        unknowns, its residual rows) and, with constraints, the multipliers of window
+        t − 1 (s unknowns, the rows of its constraints Φ_d)."""
+        r, s = self.model.order, self.model.constraints
+        t0 = r - 1 if s else r
+        return np.arange(t0, path.x.shape[0] - t0)
+
+    def constraint_rows(self, path: Path) -> np.ndarray:
+        """Mask of the multiplier unknowns (= constraint rows) in the block layout."""
+        n, s = self.model.n, self.model.constraints
+        return np.tile(np.r_[np.zeros(n, bool), np.ones(s, bool)], len(self._blocks(path)))
+
+    def multipliers(self, path: Path) -> np.ndarray:
+        """The multipliers λ in the block layout (their rows of :meth:`constraint_rows`)."""
+        if not self.model.constraints:
+            return np.zeros(0)
+        return path.lam[self._blocks(path) - 1].reshape(-1)
+
+    def magnitudes(self, path: Path) -> np.ndarray:
+        """Magnitude of every unknown, in the block layout of the C assembler: a node
+        correction is as precise as the fibres meeting there (a group fibre is held as
+        its increment hξ, a pair fibre is the node itself), a multiplier as itself."""
+        m, s = self.model, self.model.constraints
+        blocks = self._blocks(path)
+        scaled = np.array(m.info.get("step_scaled") or [False] * m.n, dtype=bool)
+        before = np.abs(path.f[np.maximum(blocks - 1, 0)])
+        after = np.abs(path.f[np.minimum(blocks, path.f.shape[0] - 1)])
+        eta = np.where(scaled, self.h * np.maximum(before, after), before)
+        lam = np.abs(path.lam[blocks - 1]) if s else np.zeros((len(blocks), 0))
+        return np.concatenate([eta, lam], axis=1).reshape(-1)
+
+
+def band_product(ab: np.ndarray, bw: int, u: np.ndarray) -> np.ndarray:
+    """J u, J given by its 2 bw + 1 diagonals, ab[bw + row − col, col] = J[row, col]."""
+    out = np.zeros_like(u)
+    for d in range(2 * bw + 1):
+        offset = d - bw  # row = column + offset
+        if abs(offset) >= u.size:       # a band wider than the matrix (few unknowns)
+            continue
+        if offset >= 0:
+            out[offset:] += ab[d, : u.size - offset] * u[: u.size - offset]
+        else:
+            out[:offset] += ab[d, -offset:] * u[-offset:]
+    return out

@@ -1,0 +1,97 @@
+"""The robustness battery of the whole-trajectory solve (issue 20, item 3).
+
+For a bundled optimal-control problem at N steps: the chord guess, the zero guess (every
+free node at the last start node: at rest at the start configuration throughout) and
+seeded perturbed guesses — the default cubic guess moved by a smooth random variation
+η(t) = Σ_{k=1}^{3} a_k sin(kπ t/T), a_k uniform in [−½, ½]^n per node coordinate (radians
+on a group), zero at the fixed ends. Smooth, because white noise of that size would put
+accelerations of order 1/h² into the guess, which no user would start from.
+Used by ``tests/test_robustness.py`` and ``scripts/robustness_bvp.py``.
+"""
+from __future__ import annotations
+
+import importlib
+
+import numpy as np
+
+from symvi.models import get
+
+
+def runtime(module, stage: str):
+    """The generated package's own copy of a run-time module."""
+    return importlib.import_module(f"{module.__name__}._runtime.{stage}")
+
+
+def free_nodes(module, path, N: int):
+    """The free nodes of a runtime Path in the layout of ``solve_bvp(..., guess=...)``."""
+    r, model = module.model.order, module.model
+    free = slice(r, N + 1 - r)
+    g = model.configurations(path.g[free]) if model.matrix_dims else None
+    if not model.matrix_dims:
+        return path.x[free]
+    return g if model.m == 0 else (path.x[free], g)
+
+
+def guesses(module, name: str, N: int, count: int = 20, amplitude: float = 0.5) -> dict:
+    """{label: guess} for the battery: "chord", "zero" and ``count`` perturbed ones."""
+    model, ex = module.model, get(name).example
+    h = ex.h * ex.n_steps / N
+    p = model.params()
+    base = runtime(module, "paths").initial_path(model, ex.start, ex.end, N, None, p, h)
+    problem = runtime(module, "assembly").Problem(model, p, h)
+    blocks = problem._blocks(base)
+    out = {"chord": "chord", "zero": zero_guess(module, name, N)}
+    t = blocks / N
+    for seed in range(count):
+        a = np.random.default_rng(seed).uniform(-amplitude, amplitude, (3, model.n))
+        eta = sum(np.outer(np.sin((k + 1) * np.pi * t), a[k]) for k in range(3))
+        eta[(blocks < model.order) | (blocks > N - model.order)] = 0.0
+        delta = np.concatenate([eta, np.zeros((len(blocks), model.constraints))], axis=1)
+        moved = problem.moved(base, delta.reshape(-1), 1.0)
+        if moved is not None:
+            out[f"perturbed {seed}"] = free_nodes(module, moved, N)
+    return out
+
+
+def zero_guess(module, name: str, N: int):
+    """Every free node equal to the last start node."""
+    model, start = module.model, get(name).example.start
+    count = N + 1 - 2 * model.order
+
+    def held(nodes):
+        nodes = np.asarray(nodes, dtype=float)
+        return np.repeat(nodes[-1:], count, axis=0)
+    if isinstance(start, tuple):
+        return tuple(held(part) for part in start)
+    return held(start)
+
+
+def run(module, name: str, N: int, count: int = 20, **options) -> dict:
+    """{label: result} over the battery at N steps (the example's horizon)."""
+    ex = get(name).example
+    h = ex.h * ex.n_steps / N
+    return {label: module.solve_bvp(ex.start, ex.end, N, h, guess=guess, **options)
+            for label, guess in guesses(module, name, N, count).items()}
+
+
+def newton_matrix(module, name: str, N: int, result):
+    """The dense Newton (KKT) matrix at a result's path and the mask of its constraint
+    rows, through the runtime's own assembly."""
+    model, ex = module.model, get(name).example
+    h = ex.h * ex.n_steps / N
+    nodes = N + 1
+    g = result.g
+    g = np.zeros((nodes, 0)) if g is None else np.concatenate(
+        [b.reshape(nodes, -1) for b in (g if isinstance(g, tuple) else (g,))], axis=1)
+    x = np.zeros((nodes, 0)) if result.x is None else result.x
+    lam = np.zeros((0, 0)) if result.multipliers is None else result.multipliers
+    path = runtime(module, "paths").Path(*(np.ascontiguousarray(a, dtype=float) for a in (x, g, result.f, lam)))
+    problem = runtime(module, "assembly").Problem(model, model.params(), h)
+    _, ab, bw, _ = problem.assemble(path, True)
+    size = ab.shape[1]
+    J = np.zeros((size, size))
+    for d in range(2 * bw + 1):
+        offset = d - bw                  # row − column
+        for col in range(max(0, -offset), min(size, size - offset)):
+            J[col + offset, col] = ab[bw + d, col]
+    return J, problem.constraint_rows(path)

@@ -1,0 +1,55 @@
+"""Warm starts: ``solve_bvp(..., guess=previous_result)`` (issue 20, item 3).
+
+A previous solve hands over its free nodes, its multipliers and its fibres (where both
+nodes are unchanged: recomputed from the configurations they would be rounded to ε/h).
+Resolving the same problem must then take the two confirming Newton iterations only, and
+a step of a parameter sweep must start nearer (a tenth of the residual) and reach the
+same solution as a cold solve, in no more iterations. (Moved boundary data are a different matter: the old free nodes then meet the
+new ends with a velocity jump of (move)/h, so a continuation in boundary data takes steps
+small against h.)
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from symvi.models import get
+
+#: One problem per kind of unknowns: a Lie group, a pair groupoid, an action groupoid with
+#: multipliers.
+WARM = ("rigid_body_oc", "double_pendulum_oc", "heavy_top_rotors_oc_variational")
+
+
+@pytest.mark.parametrize("name", WARM)
+def test_warm_start_from_the_solution_and_along_a_continuation(compiled, name):
+    mod, ex = compiled(name), get(name).example
+    N, h = ex.n_steps, ex.h
+    cold = mod.solve_bvp(ex.start, ex.end, N, h)
+    assert cold.success, cold.message
+
+    again = mod.solve_bvp(ex.start, ex.end, N, h, guess=cold)
+    assert again.success and again.iterations == 2, again.message
+    assert abs(again.cost - cold.cost) <= 1e-12 * (1 + abs(cold.cost))
+
+    # a step of a parameter sweep: the first parameter (an inertia, a mass) 5 % larger
+    symbol, value = get(name).parameters[0]
+    changed = {str(symbol): 1.05 * value}
+    reference = mod.solve_bvp(ex.start, ex.end, N, h, changed)
+    warm = mod.solve_bvp(ex.start, ex.end, N, h, changed, guess=cold)
+    assert reference.success and warm.success, (reference.message, warm.message)
+    # it starts nearer (its first residual is smaller) and is never slower
+    assert warm.residual_norms[0] < 0.1 * reference.residual_norms[0]
+    assert warm.iterations <= reference.iterations, (warm.iterations, reference.iterations)
+    assert abs(warm.cost - reference.cost) <= 1e-9 * (1 + abs(reference.cost))
+    tol = 1e-8 * (1 + np.abs(reference.f).max())
+    assert np.abs(warm.f - reference.f).max() <= tol
+    if reference.multipliers is not None:
+        scale = 1 + np.abs(reference.multipliers).max()
+        assert np.abs(warm.multipliers - reference.multipliers).max() <= 1e-7 * scale
+
+
+def test_a_previous_result_of_another_size_is_refused(compiled):
+    mod, ex = compiled("rigid_body_oc"), get("rigid_body_oc").example
+    previous = mod.solve_bvp(ex.start, ex.end, 40, 1 / 40)
+    with pytest.raises(ValueError, match=r"its own number of steps \(40\), not n_steps = 50"):
+        mod.solve_bvp(ex.start, ex.end, 50, 1 / 50, guess=previous)
