@@ -17,9 +17,8 @@ import battery
 from symvi._runtime.optimality import second_order
 from symvi.models import get
 
-#: Success rate required at N = 100 (issue 20 asks 100 % for the first three and ≥ 90 %
-#: for the heavy top with rotors in variational form; 100 % measured for all four, also at
-#: N = 1000 by ``scripts/robustness_bvp.py``). The paper's non-variational forms of the
+#: Success rate required at N = 100 and 1000 (issue 20 asks 100 % for the first three and
+#: ≥ 90 % for the heavy top with rotors in variational form; 100 % measured for all four). The paper's non-variational forms of the
 #: heavy top with rotors (2 of 22) are left to that script: their failures are reported.
 REQUIRED = {"rigid_body_oc": 1.0, "double_pendulum_oc": 1.0, "cart_pole_oc": 1.0,
             "heavy_top_rotors_oc_variational": 1.0}
@@ -63,16 +62,17 @@ def test_second_order_test_tells_minima_from_saddles():
         assert second_order(banded(W, 1), 1, np.zeros(2, bool)).minimum is expected
 
 
+@pytest.mark.parametrize("N", [100, pytest.param(1000, marks=pytest.mark.slow)])
 @pytest.mark.parametrize("name", [*REQUIRED, "rigid_body_oc_exp"])
-def test_battery_at_100_steps_succeeds_at_minima_only(compiled, name):
-    mod, N = compiled(name), 100
+def test_battery_succeeds_at_minima_only(compiled, name, N):
+    mod = compiled(name)
     outcomes = battery.run(mod, name, N, count=20)
     rate = sum(r.success for r in outcomes.values()) / len(outcomes)
     print(f"\n{name}, N = {N}: {rate:.0%} of {len(outcomes)} guesses; failures: "
           f"{ {k: r.status.name for k, r in outcomes.items() if not r.success} }")
     for label, result in outcomes.items():
         assert result.success or result.message, label
-        if result.success and label in ("chord", "perturbed 0", "perturbed 1"):
+        if result.success and N <= 100 and label in ("chord", "perturbed 0", "perturbed 1"):
             J, rows = battery.newton_matrix(mod, name, N, result)
             assert reduced_hessian_minimum(J, rows) > 0, (label, result.message)
     assert rate >= REQUIRED.get(name, 0.0), rate
