@@ -10,16 +10,13 @@ Used by ``tests/test_robustness.py`` and ``scripts/robustness_bvp.py``.
 """
 from __future__ import annotations
 
-import importlib
-
 import numpy as np
 
 from symvi.models import get
+from test_bvp_merit import dense_jacobian
+from test_bvp_merit import runtime_of as runtime
 
 
-def runtime(module, stage: str):
-    """The generated package's own copy of a run-time module."""
-    return importlib.import_module(f"{module.__name__}._runtime.{stage}")
 
 
 def free_nodes(module, path, N: int):
@@ -79,19 +76,12 @@ def newton_matrix(module, name: str, N: int, result):
     rows, through the runtime's own assembly."""
     model, ex = module.model, get(name).example
     h = ex.h * ex.n_steps / N
-    nodes = N + 1
-    g = result.g
-    g = np.zeros((nodes, 0)) if g is None else np.concatenate(
-        [b.reshape(nodes, -1) for b in (g if isinstance(g, tuple) else (g,))], axis=1)
+    paths, nodes = runtime(module, "paths"), N + 1
+    g = paths._configurations(model, result.g, nodes, "g") if model.matrix_dims \
+        else np.zeros((nodes, 0))
     x = np.zeros((nodes, 0)) if result.x is None else result.x
     lam = np.zeros((0, 0)) if result.multipliers is None else result.multipliers
-    path = runtime(module, "paths").Path(*(np.ascontiguousarray(a, dtype=float) for a in (x, g, result.f, lam)))
+    path = paths.Path(*(np.ascontiguousarray(a, dtype=float) for a in (x, g, result.f, lam)))
     problem = runtime(module, "assembly").Problem(model, model.params(), h)
     _, ab, bw, _ = problem.assemble(path, True)
-    size = ab.shape[1]
-    J = np.zeros((size, size))
-    for d in range(2 * bw + 1):
-        offset = d - bw                  # row − column
-        for col in range(max(0, -offset), min(size, size - offset)):
-            J[col + offset, col] = ab[bw + d, col]
-    return J, problem.constraint_rows(path)
+    return dense_jacobian(ab, bw), problem.constraint_rows(path)

@@ -48,7 +48,7 @@ def second_order(ab: np.ndarray, bw: int, constraint_rows: np.ndarray) -> Curvat
         pivot = _first_bad_pivot(band)
         if pivot is None:
             return Curvature(True, k * ratio, 0.0)
-    return Curvature(False, (PENALTIES[-1] if AtA is not None else 0.0) * ratio, pivot)
+    return Curvature(False, PENALTIES[-1] * ratio, pivot)   # ratio is 0 without constraints
 
 
 def convexifying_shift(ab: np.ndarray, bw: int, start: float) -> float:

@@ -174,10 +174,10 @@ def _free_nodes(model, previous: BVPResult, N: int):
 def _kept(model, previous: BVPResult, x, g, f, lam):
     """The previous solve's fibres on the elements whose nodes are unchanged (recomputed
     from the nodes, a group fibre would be rounded to ε/h) and its multipliers."""
-    old_x = previous.x if previous.x is not None else np.zeros((x.shape[0], 0))
-    old_g = previous.g if previous.g is not None else np.zeros((x.shape[0], 0))
-    old_g = np.concatenate([b.reshape(x.shape[0], -1) for b in old_g], axis=1) \
-        if isinstance(old_g, tuple) else old_g.reshape(x.shape[0], -1)
+    count = x.shape[0]
+    old_x = previous.x if previous.x is not None else np.zeros((count, 0))
+    old_g = _configurations(model, previous.g, count, "guess configurations") \
+        if model.matrix_dims else np.zeros((count, 0))
     same = (x == old_x).all(axis=1) & (g == old_g).all(axis=1)
     if previous.f.shape == f.shape:
         keep = same[:-1] & same[1:]
