@@ -74,6 +74,13 @@ def run(module, name: str, N: int, count: int = 20, **options) -> dict:
 def newton_matrix(module, name: str, N: int, result):
     """The dense Newton (KKT) matrix at a result's path and the mask of its constraint
     rows, through the runtime's own assembly."""
+    problem, path, ab, bw = assembled(module, name, N, result)
+    return dense_jacobian(ab, bw), problem.constraint_rows(path)
+
+
+def assembled(module, name: str, N: int, result, lifted: bool | None = None):
+    """(problem, path, band, bw): the runtime's Newton system at a result's path (with the
+    lifted system too when ``lifted``)."""
     model, ex = module.model, get(name).example
     h = ex.h * ex.n_steps / N
     paths, nodes = runtime(module, "paths"), N + 1
@@ -82,6 +89,6 @@ def newton_matrix(module, name: str, N: int, result):
     x = np.zeros((nodes, 0)) if result.x is None else result.x
     lam = np.zeros((0, 0)) if result.multipliers is None else result.multipliers
     path = paths.Path(*(np.ascontiguousarray(a, dtype=float) for a in (x, g, result.f, lam)))
-    problem = runtime(module, "assembly").Problem(model, model.params(), h)
+    problem = runtime(module, "assembly").Problem(model, model.params(), h, lifted=lifted)
     _, ab, bw, _ = problem.assemble(path, True)
-    return dense_jacobian(ab, bw), problem.constraint_rows(path)
+    return problem, path, ab, bw

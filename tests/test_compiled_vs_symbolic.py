@@ -308,7 +308,10 @@ def _points(rng, dm, kernel, count=POINTS):
     θ ∈ [1.5, 4.5] (see module docstring)."""
     zs, hs = rng.uniform(-1.0, 1.0, (count, len(kernel.z))), rng.uniform(0.01, 0.2, count)
     wide = np.arange(count // 2, count)
+    # an argument may use the kernel's definitions (differences of fibres): in z
+    definitions = dict(kernel.definitions)
     for arg in coefficient_arguments(kernel):
+        arg = arg.xreplace(definitions)
         columns = [i for i, x in enumerate(kernel.z) if x in arg.free_symbols]
         assert arg.free_symbols <= set(kernel.z) | {dm.step} and columns, arg
         s = Rounding(_inputs(dm, kernel, zs[wide], dm.defaults, hs[wide]))(arg)[0]

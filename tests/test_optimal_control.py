@@ -22,6 +22,7 @@ SciPy's rotation vector as exp⁻¹, and the controlled equations EL(L) written 
 from __future__ import annotations
 
 import math
+import sys
 
 import numpy as np
 import pytest
@@ -398,7 +399,8 @@ def test_newton_matrix_conditioning_and_its_limit(compiled):
     LAPACK's dgbcon, which is O(N²) on these factors) falls like N⁻⁴ (measured at the chord
     guess). Past ε its solves are rounding noise — at N = 60 000 for the rigid body — and
     a failed solve there names that cause; an ordinary failure (out of iterations at
-    N = 200) does not."""
+    N = 200) does not. By default such N are solved with the lifted system (κ ∝ N²,
+    tests/test_lifted.py), which converges at N = 10⁵ (tests/test_false_success.py)."""
     from symvi._runtime.assembly import Problem as _Problem
     from symvi._runtime.paths import initial_path
 
@@ -414,10 +416,13 @@ def test_newton_matrix_conditioning_and_its_limit(compiled):
     np.testing.assert_allclose(orders, 4.0, atol=0.3)
     ordinary = mod.solve_bvp(ex.start, ex.end, 200, 1.0 / 200, maxiter=1)
     assert not ordinary.success and "working precision" not in ordinary.message
-    N = 60_000
-    exhausted = mod.solve_bvp(ex.start, ex.end, N, 1.0 / N, maxiter=2)
+    N, assembly = 60_000, sys.modules[f"{mod.__name__}._runtime.assembly"]
+    with pytest.MonkeyPatch.context() as patch:
+        patch.setattr(assembly, "LIFT_FROM", 10**9)         # the node formulation
+        exhausted = mod.solve_bvp(ex.start, ex.end, N, 1.0 / N, maxiter=2)
     assert exhausted.status == mod.Status.MAX_ITERATIONS
     assert "singular to working precision" in exhausted.message, exhausted.message
+    assert "N^4" in exhausted.message
 
 
 def test_failed_newton_records_the_residual_of_the_returned_path(compiled):

@@ -89,13 +89,17 @@ def test_a_saddle_is_never_a_success(compiled, monkeypatch):
     guess = battery.guesses(mod, name, N)["perturbed 12"]
     with monkeypatch.context() as patch:
         patch.setattr(battery.runtime(mod, "globalisation"), "convexifying_shift",
-                      lambda ab, bw, start: start)
+                      lambda definite, start: start)
         saddle = mod.solve_bvp(ex.start, ex.end, N, ex.h * ex.n_steps / N, guess=guess,
                                maxiter=2000)
     assert saddle.status == mod.Status.SADDLE, saddle.message
     assert "not to a verified minimum" in saddle.message and "Cholesky pivot -" in saddle.message
     J, rows = battery.newton_matrix(mod, name, N, saddle)
     assert reduced_hessian_minimum(J, rows) < -1.0
+    # the lifted system's inertia (tests/test_lifted.py) finds its one negative eigenvalue
+    # (−6.0), and none once shifted by 10
+    lifted = battery.assembled(mod, name, N, saddle, lifted=True)[0].lifted_system
+    assert lifted.minimum() == (False, 1) and lifted.minimum(10.0) == (True, 0)
     again = mod.solve_bvp(ex.start, ex.end, N, ex.h * ex.n_steps / N, guess=saddle)
     assert again.status == mod.Status.SADDLE, again.message
     found = mod.solve_bvp(ex.start, ex.end, N, ex.h * ex.n_steps / N, guess=guess)

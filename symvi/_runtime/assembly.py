@@ -10,7 +10,10 @@ from __future__ import annotations
 
 import numpy as np
 
+from .band import reciprocal_condition
 from .gauge import Gauge
+from .lifted import LIFT_FROM, LiftedSystem
+from .optimality import positive_definite
 from .paths import Path
 
 
@@ -23,13 +26,19 @@ class Problem:
     amplifies into O(1) errors of the slowest modes at N = 10⁵.
     """
 
-    def __init__(self, model, p, h):
+    def __init__(self, model, p, h, lifted: bool | None = None):
         self.model, self.p, self.h = model, p, h
+        #: Whether Newton corrections come from the lifted system (:mod:`.lifted`): by
+        #: default where the model has one and N ≥ LIFT_FROM.
+        self.lifted = lifted
+        self._lifted = None
         #: An optimal-control problem minimises its cost: Newton steps are then globalised
         #: on the cost itself, or with constraints on its ℓ1 exact penalty (see
         #: :func:`.globalisation.descent_step`).
         self.minimise = bool(model.info.get("controls"))
         self.shift, self.penalty = 0.0, 0.0
+        #: The residual's rounding level at the last iteration (bvp._rounding_level).
+        self.level = None
         self._band = self._work = None   # reused: fresh pages are slow to touch at large N
         self.gauge = None
 
@@ -51,6 +60,10 @@ class Problem:
         code = m.lib.symvi_bvp_assemble(m.ptr(path.x), m.ptr(path.f), m.ptr(path.lam), n_nodes,
                                         m.ptr(self.p), self.h, m.ptr(res),
                                         m.ptr(ab.T) if with_jacobian else m.ffi.NULL)
+        if with_jacobian and self._uses_lifted(n_nodes):
+            if self._lifted is None or self._lifted.n_nodes != n_nodes:
+                self._lifted = LiftedSystem(m, n_nodes)
+            code = code if self._lifted.assemble(path, self.p, self.h) else 1
         if with_jacobian and m.info.get("gauges"):
             if self.gauge is None:
                 self.gauge = Gauge(m, n_nodes)
@@ -67,35 +80,38 @@ class Problem:
         from scipy.linalg import LinAlgError
         from scipy.linalg.lapack import dgbsv
 
+        if self._lifted is not None:
+            return self._lifted.solve(rhs, shift, shifted)
         rhs = self._newton_matrix(ab, bw, rhs, shift, shifted, at)
         _, _, x, info = dgbsv(bw, bw, self._work, rhs, overwrite_ab=True)
         if info != 0:
             raise LinAlgError(f"dgbsv: singular at column {info}" if info > 0 else "dgbsv")
         return x
 
+    @property
+    def lifted_system(self) -> LiftedSystem | None:
+        """The lifted system of the last assembly with a Jacobian, where it is used."""
+        return self._lifted
+
+    def definite(self, ab, bw: int, shift: float) -> bool:
+        """Whether J + shift·I is positive definite (a problem without constraints): from
+        the lifted system's inertia where it is used, else by band Cholesky of J."""
+        if self._lifted is not None:
+            return self._lifted.minimum(shift)[0]
+        return positive_definite(ab, bw, shift)
+
+    def _uses_lifted(self, n_nodes: int) -> bool:
+        if not self.model.info.get("lifted"):
+            return False
+        return n_nodes - 1 >= LIFT_FROM if self.lifted is None else self.lifted
+
     def reciprocal_condition(self, ab, bw: int) -> float:
-        """An estimate of 1/κ₁ of the Newton matrix of :meth:`solve` without shift: below ε
-        rounding may dominate its solves. ‖J⁻¹‖₁ by Higham and Tisseur's block estimator
-        (SciPy's ``onenormest``) on solves with the banded LU, O(N) — LAPACK's dgbcon
-        rescans the vector in every column of an ill-conditioned factor, O(N²): 90 s at
-        N = 10⁵."""
-        from scipy.linalg.lapack import dgbtrf, dgbtrs
-        from scipy.sparse.linalg import LinearOperator, onenormest
-
+        """An estimate of 1/κ₁ of the matrix :meth:`solve` factorises without shift (the
+        lifted system's where it is used): below ε rounding may dominate its solves."""
+        if self._lifted is not None:
+            return reciprocal_condition(self._lifted.band.copy(order="F"), self._lifted.bw)
         self._newton_matrix(ab, bw, np.zeros(self._work.shape[1]))
-        norm = float(np.abs(self._work[bw:]).sum(axis=0).max(initial=0.0))
-        lu, pivots, info = dgbtrf(self._work, bw, bw, overwrite_ab=True)
-        if info != 0 or norm == 0.0:
-            return 0.0
-        size = lu.shape[1]
-
-        def solve(v, trans=0):
-            return dgbtrs(lu, bw, bw, np.asarray(v, dtype=float), pivots, trans=trans)[0]
-        inverse = LinearOperator((size, size), matvec=solve, rmatvec=lambda v: solve(v, 1),
-                                 dtype=float)
-        estimate = onenormest(inverse, t=8) if size > 16 else float(np.abs(
-            np.column_stack([solve(e) for e in np.eye(size)])).sum(axis=0).max())
-        return 1.0 / (norm * estimate) if np.isfinite(estimate) and estimate > 0 else 0.0
+        return reciprocal_condition(self._work, bw)
 
     def _newton_matrix(self, ab, bw: int, rhs: np.ndarray, shift: float = 0.0,
                        shifted: np.ndarray | None = None, at: Path | None = None) -> np.ndarray:
@@ -166,17 +182,3 @@ class Problem:
         eta = np.where(scaled, self.h * np.maximum(before, after), before)
         lam = np.abs(path.lam[blocks - 1]) if s else np.zeros((len(blocks), 0))
         return np.concatenate([eta, lam], axis=1).reshape(-1)
-
-
-def band_product(ab: np.ndarray, bw: int, u: np.ndarray) -> np.ndarray:
-    """J u, J given by its 2 bw + 1 diagonals, ab[bw + row − col, col] = J[row, col]."""
-    out = np.zeros_like(u)
-    for d in range(2 * bw + 1):
-        offset = d - bw  # row = column + offset
-        if abs(offset) >= u.size:       # a band wider than the matrix (few unknowns)
-            continue
-        if offset >= 0:
-            out[offset:] += ab[d, : u.size - offset] * u[: u.size - offset]
-        else:
-            out[:offset] += ab[d, -offset:] * u[-offset:]
-    return out

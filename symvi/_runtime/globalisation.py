@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .assembly import band_product
+from .band import band_product
 from .optimality import convexifying_shift
 from .paths import Path
 
@@ -79,7 +79,7 @@ def descent_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0**-12
         return state, None
     scale, shift = float(np.abs(ab[2 * bw][nodes]).max(initial=0.0)), problem.shift
     if not rows.any():
-        shift = convexifying_shift(ab, bw, shift)
+        shift = convexifying_shift(lambda mu: problem.definite(ab, bw, mu * scale), shift)
     while shift <= 1e3:
         if shift > 0.0:
             try:

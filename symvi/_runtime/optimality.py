@@ -51,24 +51,29 @@ def second_order(ab: np.ndarray, bw: int, constraint_rows: np.ndarray) -> Curvat
     return Curvature(False, PENALTIES[-1] * ratio, pivot)   # ratio is 0 without constraints
 
 
-def convexifying_shift(ab: np.ndarray, bw: int, start: float) -> float:
+def convexifying_shift(definite, start: float) -> float:
     """For a problem without constraints: the smallest μ in start, 10 start, … (from
-    1e-8, up to 1e3; relative to W's largest diagonal entry) for which W + μ·max|diag W|·I
-    is positive definite, else inf — the inertia correction of a modified Newton step
-    (Nocedal & Wright §3.4, Algorithm 3.3), so that every step is a descent direction of
-    S that no saddle or maximum attracts. (From the zero guess: rigid_body_oc at N = 1000
-    in 17 iterations instead of 353; double_pendulum_oc at N = 1000 from a perturbed
-    guess to the minimum instead of a saddle of 65× its cost.)"""
-    W = _node_band(ab, bw)
-    scale = float(np.abs(W[0]).max(initial=0.0)) or 1.0
+    1e-8, up to 1e3; relative to W's largest diagonal entry) for which ``definite(μ)``,
+    W + μ·max|diag W|·I positive definite, else inf — the inertia correction of a
+    modified Newton step (Nocedal & Wright §3.4, Algorithm 3.3), so that every step is a
+    descent direction of S that no saddle or maximum attracts. (From the zero guess:
+    rigid_body_oc at N = 1000 in 17 iterations instead of 353; double_pendulum_oc at
+    N = 1000 from a perturbed guess to the minimum instead of a saddle of 65× its
+    cost.)"""
     mu = start
     while mu <= 1e3:
-        shifted = W.copy()
-        shifted[0] += mu * scale
-        if _first_bad_pivot(shifted) is None:
+        if definite(mu):
             return mu
         mu = max(10 * mu, 1e-8)
     return np.inf
+
+
+def positive_definite(ab: np.ndarray, bw: int, shift: float) -> bool:
+    """Whether W + shift·I is positive definite, W the symmetric part of the (all node)
+    Newton matrix in the band storage of ``assembly.Problem.assemble``: band Cholesky."""
+    W = _node_band(ab, bw)
+    W[0] += shift
+    return _first_bad_pivot(W) is None
 
 
 def _blocks(ab, bw, constraint_rows):

@@ -81,10 +81,14 @@ def check_memory(model, elements: int, keep: int, buffered: int) -> None:
 def check_path_memory(model, n_steps: int) -> None:
     """Refuse a whole-trajectory solve whose Newton matrices would not fit in memory: per
     node, the band and its factorised copy ((3 bw + 1)·B doubles each, B = n + s unknowns,
-    bw = (r + 1)·B − 1) and some eight copies of the path (trial steps, results)."""
+    bw = (r + 1)·B − 1), those of the lifted system where the model has one, and some
+    eight copies of the path (trial steps, results)."""
     B = model.n + model.constraints
     band = 3 * ((model.order + 1) * B - 1) + 1
     path = model.m + model.info["configuration_dim"] + model.n + model.constraints
-    needed = 8.0 * (n_steps + 1) * (2 * band * B + 8 * path)
+    per_node = 2 * band * B + 8 * path
+    if model.info.get("lifted"):      # the lifted system (lifted.py): 3n unknowns per node
+        per_node += 2 * (3 * (5 * model.n - 1) + 1) * 3 * model.n
+    needed = 8.0 * (n_steps + 1) * per_node
     require(needed, f"the whole-trajectory solve with N = {n_steps:,}",
             "use fewer steps")

@@ -69,6 +69,7 @@ def info(dm: DerivedModel, key: str, description: str) -> dict:
         "whole_trajectory": dm.whole_trajectory, "constraints": dm.constraint_count,
         "controls": dm.control_count, "step_scaled": list(dm.step_scaled),
         "symmetries": list(dm.symmetries), "gauges": list(dm.gauges),
+        "lifted": bool(dm.fibre_sources),
         "symvi_version": __version__, "key": key,
         "configuration_dim": dm.c_context["configuration_dim"],
         "matrix_dims": [G["matrix_dim"] for G in dm.c_context["groups"]],

@@ -86,6 +86,10 @@ class DerivedModel:
     #: Names of the symmetries on which the constraints depend exactly (the ``gauge``
     #: kernel's rows).
     gauges: tuple[str, ...] = ()
+    #: For the lifted whole-trajectory solve (:func:`fibre_sources`): per fibre
+    #: coordinate, the base coordinate it is measured from (a pair factor's q_{k+1}) or
+    #: −1 (a group increment); empty when the model has no lifted solve.
+    fibre_sources: tuple[int, ...] = ()
 
     @property
     def stencil_elements(self) -> int:
@@ -214,6 +218,7 @@ def _stack(vectors) -> sp.Matrix:
 def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
     engine, r, g = _Engine(dm), dm.order, dm.groupoid
     constrained = bool(dm.constraints)
+    sources = fibre_sources(dm)
     full = _stencil(dm, 2 * r, windows=r + 1 if constrained else 0)
     residual = engine.variation(full, r, range(r + 1))
     one = _stencil(dm, 1)
@@ -225,8 +230,10 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
         Kernel("variations", one.z, (("right", g.right(one.xs[0], one.fs[0], dm.step)),
                                      ("left", g.left(one.xs[0], one.fs[0], dm.step))),
                "node variations of one element: d(x, f)/dε of g·σ_a(ε) and σ_a(ε)⁻¹·g"),
-        Kernel("lagrangian", window.z, (("value", sp.Matrix([engine.lagrangian(window, 0)])),),
-               "L_d on one window of r elements", window.definitions),
+        _in_increments(Kernel("lagrangian", window.z,
+                              (("value", sp.Matrix([engine.lagrangian(window, 0)])),),
+                              "L_d on one window of r elements", window.definitions),
+                       window, sources),
     ]
     manifold = g.manifold(one.xs[0])
     if manifold:
@@ -236,11 +243,13 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
     if g.whole_trajectory:
         eta = tuple(sp.Dummy(f"eta_{a}", real=True) for a in range(g.fibre_dim))
         kernels += [
-            Kernel("stencil", full.z,
-                   (("residual", residual), ("jacobian", full.total_jacobian(residual))),
-                   "residual and its Jacobian with respect to every stencil coordinate "
-                   "(multipliers of the r+1 windows last)",
-                   full.definitions + full.jacobian_definitions, along=not constrained),
+            _in_increments(Kernel(
+                "stencil", full.z,
+                (("residual", residual), ("jacobian", full.total_jacobian(residual))),
+                "residual and its Jacobian with respect to every stencil coordinate "
+                "(multipliers of the r+1 windows last)",
+                full.definitions + full.jacobian_definitions, along=not constrained),
+                full, sources),
             Kernel("move", one.xs[0] + eta, (("x", sp.Matrix(g.move(one.xs[0], eta))),),
                    "base point of a node after the variation g -> g tau(eta)", along=False)]
     if constrained:
@@ -249,6 +258,8 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
             "constraint", window.z, (("value", phi), ("jacobian", window.total_jacobian(phi))),
             "discrete constraints Phi_d on one window and their Jacobian",
             window.definitions + window.jacobian_definitions))
+    if sources:
+        kernels += _lifted_kernels(dm, engine, window, one)
     if dm.gauges:
         sections = [c for _, z in dm.gauges for c in z]
         kernels.append(Kernel(
@@ -270,6 +281,80 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
         kernels.append(Kernel("energy", one.z, (("value", sp.Matrix([energy])),),
                               "discrete energy E_d = −∂L_d/∂h (Kane, Marsden & Ortiz)"))
     return tuple(kernels)
+
+
+def fibre_sources(dm: DiscreteModel) -> tuple[int, ...]:
+    """Which fibre coordinates are increments, for the lifted solve (``templates/lifted.c.j2``).
+
+    The lifted Newton system takes the increments u_k of the elements as unknowns beside
+    the nodes: a group factor's fibre hξ is one (−1), a pair factor's fibre q_{k+1} is
+    measured from its base coordinate q_k (its index; u = q_{k+1} − q_k). It exists for
+    unconstrained second-order whole-trajectory models whose targets are plain fibre
+    coordinates (pair and matrix-group factors; not action groupoids): () otherwise.
+    """
+    g = dm.groupoid
+    if dm.order != 2 or dm.constraints or not g.whole_trajectory:
+        return ()
+    one = _stencil(dm, 1)
+    fibre = {s: i for i, s in enumerate(one.fs[0])}
+    target = list(g.target(one.xs[0], one.fs[0], dm.step))
+    if not all(t in fibre for t in target):
+        return ()
+    sources = [-1] * g.fibre_dim
+    for j, t in enumerate(target):
+        sources[fibre[t]] = j
+    return tuple(sources)
+
+
+def _in_increments(kernel: Kernel, st: _Stencil, sources: Sequence[int]) -> Kernel:
+    """``kernel`` evaluated from differences: the increments d_k = q_{k+1} − q_k of its
+    pair coordinates, and the changes d_k = f_k − f_{k−1} of its group increments.
+
+    SymPy's derivatives expand differences of nodes into sums like 8q₂ − 4q₁ − 4q₃ whose
+    rounding, ε|q|/h³ in a second-order residual, is noise the Newton matrix amplifies
+    (cubic_spline: errors of 4e-5 at N = 10⁵); a group increment f = hξ differenced the
+    same way rounds like ε|ξ|/h² instead of ε|ξ̇|/h. The differences of stored numbers
+    are exact (Sterbenz), so in them the expressions round like the quantities they
+    approximate. Every output (a Jacobian still with respect to z) is rewritten with each
+    such coordinate as its predecessor plus the difference, which SymPy's automatic
+    simplification cancels in the linear combinations; the differences are the kernel's
+    first definitions. Unchanged without ``sources`` (:func:`fibre_sources`).
+    """
+    if not sources or kernel.definitions:
+        return kernel
+    substitution, definitions = {}, []
+    for i, j in enumerate(sources):
+        # a pair coordinate from its base point, a group increment from the one before
+        first = 0 if j >= 0 else 1
+        previous = running = st.xs[0][j] if j >= 0 else st.fs[0][i]
+        for k, f in enumerate(st.fs[first:], start=first):
+            d = sp.Dummy(f"d{k}_{i}", real=True)
+            definitions.append((d, f[i] - previous))
+            running = running + d
+            substitution[f[i]] = running
+            previous = f[i]
+    outputs = tuple((name, M.xreplace(substitution)) for name, M in kernel.outputs)
+    return Kernel(kernel.name, kernel.z, outputs, kernel.doc, tuple(definitions), kernel.along)
+
+
+def _lifted_kernels(dm: DiscreteModel, engine: "_Engine", window: _Stencil,
+                    one: _Stencil) -> list[Kernel]:
+    """The window Hessian of L_d and the derivatives of the node variations contracted with
+    a covector: with them the lifted system is assembled (``templates/lifted.c.j2``)."""
+    g = dm.groupoid
+    Ld = sp.Matrix([engine.lagrangian(window, 0)])
+    gradient = Ld.jacobian(window.z)
+    hessian = gradient.T.jacobian(window.z)
+    c = tuple(sp.Dummy(f"c_{i}", real=True) for i in range(len(one.z)))
+    cv = sp.Matrix(c)
+    z = one.z
+    duals = tuple((name, (side(one.xs[0], one.fs[0], dm.step).T * cv).jacobian(z))
+                  for name, side in (("left", g.left), ("right", g.right)))
+    return [Kernel("window_hessian", window.z, (("gradient", gradient), ("hessian", hessian)),
+                   "gradient and Hessian of L_d on one window (x_w, f_w, f_{w+1})", along=False),
+            Kernel("variations_dual", z + c, duals,
+                   "d/d(x, f) of left(x, f)^T c and right(x, f)^T c: the curvature of the node "
+                   "variations along a covector c", along=False)]
 
 
 def _section(symmetry, groupoid, x) -> sp.Matrix:
@@ -450,4 +535,5 @@ def _derive(dm: DiscreteModel) -> DerivedModel:
                         symmetries=tuple(z.name for z in dm.symmetries)
                         if any(k.name == "noether" for k in kernels) else (),
                         gauges=tuple(name for name, _ in dm.gauges), c_context=g.c_context(),
+                        fibre_sources=fibre_sources(dm),
                         coefficients=tuple(sorted(coefficients, key=lambda c: c.__name__)))

@@ -1,0 +1,100 @@
+"""The lifted whole-trajectory Newton system (issue 20, item 2; ``templates/lifted.c.j2``).
+
+The node formulation's Newton matrix is a fourth difference (κ ∝ N⁴): from N ≈ 10⁵ its
+LU has no correct digit. The lifted system — node corrections, the elements' increments
+and momenta as unknowns, composability as rows — gives the same Newton step with κ ∝ N²,
+and its inertia decides minimum or saddle where J's Cholesky cannot (at a saddle:
+tests/test_robustness.py). Convergence at N = 10⁵ is hunted in tests/test_false_success.py.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from symvi.models import get
+
+from test_bvp_merit import dense_jacobian, runtime_of
+from test_false_success import REST_TO_REST, cubic
+
+LIFTED = ["cubic_spline", "so3_cubic", "rigid_body_oc", "double_pendulum_oc"]
+
+
+def boundary(name: str, N: int) -> tuple:
+    """(start, end, h) over the horizon 1: the exact cubic's end nodes for cubic_spline,
+    the rigid-body quarter turn for the models on SO(3), else the example's own data."""
+    h = 1.0 / N
+    if name == "cubic_spline":
+        exact = cubic(h * np.arange(N + 1))
+        return exact[:2], exact[-2:], h
+    ex = get(REST_TO_REST if name == "so3_cubic" else name).example
+    return ex.start, ex.end, (ex.h * ex.n_steps / N if name != "so3_cubic" else h)
+
+
+def systems(mod, name: str, N: int, guess="chord"):
+    """The node and the lifted Problem, both assembled at the same initial path."""
+    start, end, h = boundary(name, N)
+    p = mod.model.params(None)
+    path = runtime_of(mod, "paths").initial_path(mod.model, start, end, N, guess, p, h)
+    out = []
+    for lifted in (False, True):
+        problem = runtime_of(mod, "assembly").Problem(mod.model, p, h, lifted=lifted)
+        res, ab, bw, finite = problem.assemble(path, True)
+        assert finite and (problem.lifted_system is not None) is lifted
+        out.append((problem, res, ab, bw))
+    return out
+
+
+@pytest.mark.parametrize("name", LIFTED)
+def test_lifted_steps_are_the_newton_steps(compiled, name):
+    """Pair groupoid (increments measured from the nodes), SO(3) with its curvature terms,
+    with and without the inertia correction's shift: the same correction as J η = −R."""
+    mod = compiled(name)
+    assert mod.INFO["lifted"]
+    (node, res, ab, bw), (lifted, _, _, _) = systems(mod, name, 40)
+    for shift in (0.0, 3.0):
+        expected = node.solve(ab, bw, -res, shift)
+        got = lifted.solve(ab, bw, -res, shift)
+        assert np.abs(got - expected).max() <= 1e-9 * np.abs(expected).max(), shift
+
+
+def equilibrated(A: np.ndarray, sweeps: int = 30) -> np.ndarray:
+    """Ruiz's row and column equilibration: the scaling a pivoting LU does not feel."""
+    r, c = np.ones(A.shape[0]), np.ones(A.shape[1])
+    for _ in range(sweeps):
+        r /= np.sqrt(np.abs(A * r[:, None] * c).max(axis=1))
+        c /= np.sqrt(np.abs(A * r[:, None] * c).max(axis=0))
+    return A * r[:, None] * c
+
+
+@pytest.mark.parametrize("name", ["cubic_spline", "rigid_body_oc"])
+def test_conditioning_grows_like_N_squared(compiled, name):
+    """κ₁ of the equilibrated matrices at N = 50, 100, 200: the node matrix's grows like
+    N⁴, the lifted one's like N² (measured exponents 4.04 and 2.01 on cubic_spline, 4.02
+    and 1.79 on rigid_body_oc; 4.0 and 1.9 on N = 100 … 800)."""
+    mod = compiled(name)
+    Ns, kappas = [50, 100, 200], []
+    for N in Ns:
+        (_, _, ab, bw), (lifted, _, _, _) = systems(mod, name, N, guess="cubic")
+        system = lifted.lifted_system
+        kappas.append([np.linalg.cond(equilibrated(dense_jacobian(band, width)), 1)
+                       for band, width in ((ab, bw), (system.band, system.bw))])
+    node, lifted = np.polyfit(np.log(Ns), np.log(kappas), 1)[0]
+    print(f"\n{name}: κ ∝ N^{node:.2f} (nodes), N^{lifted:.2f} (lifted)")
+    assert 3.7 <= node <= 4.3 and 1.7 <= lifted <= 2.3, (node, lifted)
+
+
+def test_inertia_counts_the_newton_matrix_eigenvalues(compiled):
+    """The lifted verdict for J + s·I at shifts s between J's eigenvalues: exactly the
+    eigenvalues below −s are counted, at a path where J is indefinite."""
+    name, N = "double_pendulum_oc", 60
+    mod = compiled(name)
+    (_, _, ab, bw), (lifted, _, _, _) = systems(mod, name, N)
+    J = dense_jacobian(ab, bw)
+    eigenvalues = np.linalg.eigvalsh(0.5 * (J + J.T))
+    assert eigenvalues[0] < 0, "the chord path should be a saddle of the cost"
+    gaps = 0.5 * (eigenvalues[:-1] + eigenvalues[1:])
+    for cut in [*gaps[:4], eigenvalues[0] - 1.0]:
+        shift = -cut
+        minimum, excess = lifted.lifted_system.minimum(shift)
+        below = int((eigenvalues < cut).sum())
+        assert (excess, minimum) == (below, below == 0), (shift, excess, below)
