@@ -139,5 +139,5 @@ def test_curvature_is_the_quadratic_form_of_the_node_block(compiled, newton_step
     nodes = ~problem.constraint_rows(path)
     W, d = dense_jacobian(ab, bw)[np.ix_(nodes, nodes)], delta[nodes]
     globalisation = runtime_of(compiled(NAME), "globalisation")
-    assert globalisation.curvature(ab, bw, delta, nodes, 0.5) == pytest.approx(d @ W @ d + 0.5 * d @ d,
-                                                                       rel=1e-12)
+    assert globalisation.curvature(problem.model, ab, bw, delta, nodes, 0.5) == \
+        pytest.approx(d @ W @ d + 0.5 * d @ d, rel=1e-12)

@@ -116,7 +116,9 @@ def _minimum(problem: Problem, path: Path, message: str) -> tuple[Status, str]:
         minimum, excess = problem.lifted_system.minimum()
         if minimum:
             return Status.SUCCESS, message
-        pivot = f" ({excess} negative or zero eigenvalues, from the lifted system's inertia)"
+        pivot = (f" ({excess} negative eigenvalues, from the lifted system's inertia)"
+                 if excess > 0 else " (a vanishing pivot in the lifted system's inertia: "
+                 "the Hessian is singular to working precision)")
     else:
         verdict = second_order(ab, bw, problem.constraint_rows(path)) if finite else None
         if verdict is not None and verdict.minimum:

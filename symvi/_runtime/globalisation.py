@@ -7,18 +7,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from .band import band_product
+from .band import product
 from .optimality import convexifying_shift
 from .paths import Path
 
 
-def curvature(ab: np.ndarray, bw: int, delta: np.ndarray, nodes: np.ndarray,
-               shift: float) -> float:
+def curvature(model, ab: np.ndarray, bw: int, delta: np.ndarray, nodes: np.ndarray,
+              shift: float) -> float:
     """d_ηᵀ (W + shift·I) d_η, W = ∂R_η/∂η the node block of the Jacobian (the Hessian of
     S + λ·Φ_d), d_η the node part of ``delta``; ``ab`` in the band storage of
     :meth:`.assembly.Problem.assemble`."""
     d = np.where(nodes, delta, 0.0)
-    return float(d @ band_product(ab[bw:], bw, d)) + shift * float(d @ d)
+    return float(d @ product(model, ab, bw, d)) + shift * float(d @ d)
 
 
 def descent_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0**-12):
@@ -44,8 +44,9 @@ def descent_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0**-12
     positive curvature. Far from a minimum it keeps Newton away from saddles and maxima
     of S, where the residual-norm merit is content to go.
 
-    Without constraints W is the whole Newton matrix and its inertia is known from a band
-    Cholesky factorisation: the shift starts at the smallest that makes W + μ·I
+    Without constraints W is the whole Newton matrix and its inertia is known (from a band
+    Cholesky factorisation, or for the lifted system from its block LDLᵀ:
+    :meth:`.assembly.Problem.definite`): the shift starts at the smallest that makes W + μ·I
     positive definite (:func:`.optimality.convexifying_shift`, modified Newton), so no
     step heads for a saddle (the battery: rigid_body_oc from the zero guess at N = 1000
     in 17 iterations instead of 353; double_pendulum_oc from a perturbed guess to its
@@ -88,7 +89,7 @@ def descent_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0**-12
                 shift = max(10 * shift, 1e-8)
                 continue
         descent, nu, alpha = slope(delta), problem.penalty, 1.0
-        if rows.any() and curvature(ab, bw, delta, nodes, shift * scale) <= 0.0:
+        if rows.any() and curvature(problem.model, ab, bw, delta, nodes, shift * scale) <= 0.0:
             descent = 0.0       # into W's negative curvature: shift instead
         while descent < 0.0 and alpha >= min_alpha:
             trial = problem.moved(state, delta, alpha)

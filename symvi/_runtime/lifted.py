@@ -8,9 +8,10 @@ changes μ as unknowns (the discrete-mechanics analogue of multiple shooting): i
 are the node residuals, the momenta's definitions and the elements' composability, each
 a first or second difference. Its condition number after equilibration grows like N²
 (measured exponents 2.0 on cubic_spline and 1.8–1.9 on rigid_body_oc, against 4.0 for
-J; tests/test_lifted.py). It is factorised after Ruiz equilibration and each solve is
-refined twice, so that at N = 10⁶ (κ ≈ 10¹³) the steps stay accurate: cubic_spline
-converges within 9e-12 of the exact cubic at N = 10⁶ and 3e-12 at 10⁵, where J's LU
+J; tests/test_lifted.py). It is factorised after Ruiz equilibration and a solve is
+refined (at most :data:`REFINEMENTS` times) while its componentwise backward error
+exceeds 4ε, so that at N = 10⁶ (κ ≈ 10¹³) the steps stay accurate: cubic_spline
+converges within 2e-11 of the exact cubic at N = 10⁶ and 3e-12 at 10⁵, where J's LU
 reached 4e-5. It has three times J's unknowns and a band of 5n − 1 diagonals on either
 side instead of 3n − 1, so it is used where J loses accuracy (:data:`LIFT_FROM`).
 """
@@ -71,14 +72,14 @@ class LiftedSystem:
                 self._scaling = self._equilibrate()
             else:
                 _scale(self.work, self.bw, *self._scaling)
-            rows, cols = self._scaling
             lu, pivots, info = dgbtrf(self.work, self.bw, self.bw, overwrite_ab=True)
             if info != 0:
                 self._factored = None
                 raise LinAlgError(f"dgbtrf (lifted system): singular at column {info}"
                                   if info > 0 else "dgbtrf (lifted system)")
-            self._factored = (key, lu, pivots, rows, cols)
-        _, lu, pivots, rows, cols = self._factored
+            self._factored = (key, lu, pivots)
+        _, lu, pivots = self._factored
+        rows, cols = self._scaling
 
         def solve(b):
             y, info = dgbtrs(lu, self.bw, self.bw, rows * b, pivots)
