@@ -69,8 +69,9 @@ def cache_key(model: Model) -> str:
       swap (:func:`~symvi.build.cache.generating_sources`);
     * the compile: :data:`COMPILE_ARGS`, the compiler cffi would run and the flags
       setuptools adds (:func:`~symvi.build.cache.compiler_identity`), Python's extension
-      suffix (its ABI), and the versions of SymPy (simplifies and prints the C), Jinja2
-      (renders it) and cffi (writes the wrapper, drives the compile).
+      suffix (its ABI), and the versions of SymPy (simplifies and prints the C),
+      SymEngine (differentiates), Jinja2 (renders it) and cffi (writes the wrapper,
+      drives the compile).
 
     Editing a check, the command line or the build's lock therefore reuses every build.
     The sources, the compiler's files and the libraries' versions are read once per

@@ -66,7 +66,7 @@ _IMPORT_START = re.compile(
 _FLAG_VARIABLES = ("CFLAGS", "CPPFLAGS", "LDSHARED", "LDFLAGS")
 #: The libraries that shape the generated files: SymPy simplifies and prints the C,
 #: Jinja2 renders it, cffi writes the wrapper and drives the compile.
-_LIBRARIES = ("sympy", "jinja2", "cffi")
+_LIBRARIES = ("sympy", "symengine", "jinja2", "cffi")
 
 
 # -- the sources that generate a package ---------------------------------------------------

@@ -34,17 +34,36 @@ def sequential_lambdify(args: Sequence[sp.Symbol],
 
     One function whose body assigns the definitions, then the common subexpressions of
     ``expr``: lambdify's ``cse`` hook takes the pairs as they are (one lambdify per
-    definition cost seconds on the SE(3) models). The definitions ride along in the
-    expression lambdify sees, so that it finds the implementations of the functions
-    they call (the exponential's coefficients).
+    definition cost seconds on the SE(3) models). The functions it calls that NumPy lacks
+    (the exponential's coefficients) come with their own implementations (``_imp_``),
+    gathered here once: lambdify's own search for them walks the whole tree per call
+    (6 s on se3_body_exp's step Jacobian).
     """
     definitions = list(definitions)
 
     def with_definitions(exprs):
         common, reduced = sp.cse(exprs[0], symbols=sp.numbered_symbols("_rank_cse"))
         return definitions + common, reduced[0]
-    carried = (expr,) + tuple(e for _, e in definitions)
-    return sp.lambdify(list(args), carried, "numpy", cse=with_definitions)
+    implementations = _implementations([expr] + [e for _, e in definitions])
+    return sp.lambdify(list(args), (expr,), [implementations, "numpy"], use_imps=False,
+                       cse=with_definitions)
+
+
+def _implementations(expressions) -> dict:
+    """{name: _imp_} of the functions applied in ``expressions`` that carry one, each
+    distinct subexpression visited once (derived expressions share subtrees heavily)."""
+    found, seen, stack = {}, set(), []
+    for e in expressions:
+        stack.extend(e if isinstance(e, sp.MatrixBase) else [e])
+    while stack:
+        e = stack.pop()
+        if e in seen:
+            continue
+        seen.add(e)
+        if isinstance(e, sp.Function) and hasattr(e, "_imp_"):
+            found[type(e).__name__] = e._imp_
+        stack.extend(e.args)
+    return found
 
 
 def generic_rank(matrix: sp.Matrix, symbols: Sequence[sp.Symbol],

@@ -33,6 +33,7 @@ from ..discretisation.discretise import DiscreteModel
 from ..errors import ModelError
 from ..groupoids.analytic import used_coefficients
 from ..declaration.rank import generic_rank
+from .differentiate import gradient_and_hessian, jacobian
 
 
 @dataclass(frozen=True)
@@ -116,12 +117,9 @@ class _Stencil:
 
     def total_jacobian(self, R: sp.Matrix) -> sp.Matrix:
         """dR/dz, with the chain rule through the named base points."""
-        J = R.jacobian(self.z)
         named = {s for s, _ in self.definitions}
-        for x, D in zip(self.xs[1:], self.source_jacobians[1:]):
-            if x and x[0] in named:
-                J += R.jacobian(x) * D
-        return J
+        return jacobian(R, self.z, [(x, D) for x, D in zip(self.xs[1:], self.source_jacobians[1:])
+                                    if x and x[0] in named])
 
 
 def _selector(symbols, z) -> sp.Matrix:
@@ -342,13 +340,11 @@ def _lifted_kernels(dm: DiscreteModel, engine: "_Engine", window: _Stencil,
     """The window Hessian of L_d and the derivatives of the node variations contracted with
     a covector: with them the lifted system is assembled (``templates/lifted.c.j2``)."""
     g = dm.groupoid
-    Ld = sp.Matrix([engine.lagrangian(window, 0)])
-    gradient = Ld.jacobian(window.z)
-    hessian = gradient.T.jacobian(window.z)
+    gradient, hessian = gradient_and_hessian(engine.lagrangian(window, 0), window.z)
     c = tuple(sp.Dummy(f"c_{i}", real=True) for i in range(len(one.z)))
     cv = sp.Matrix(c)
     z = one.z
-    duals = tuple((name, (side(one.xs[0], one.fs[0], dm.step).T * cv).jacobian(z))
+    duals = tuple((name, jacobian(side(one.xs[0], one.fs[0], dm.step).T * cv, z))
                   for name, side in (("left", g.left), ("right", g.right)))
     return [Kernel("window_hessian", window.z, (("gradient", gradient), ("hessian", hessian)),
                    "gradient and Hessian of L_d on one window (x_w, f_w, f_{w+1})", along=False),
@@ -418,7 +414,7 @@ def _step_kernels(dm: DiscreteModel, engine: _Engine, full: _Stencil,
     p_plus = _stack([engine.variation(half, j, range(r)) for j in range(r, 2 * r)])
     p_minus = -_stack([engine.variation(half, j, range(r)) for j in range(r)])
     return [
-        Kernel("step", full.z, (("residual", residual), ("jacobian", residual.jacobian(unknown))),
+        Kernel("step", full.z, (("residual", residual), ("jacobian", jacobian(residual, unknown))),
                "discrete Euler–Lagrange residual at the middle node and ∂R/∂f_{K−1}",
                full.definitions),
         Kernel("predict", full.z, (("guess", guess),),
@@ -446,11 +442,11 @@ def step_jacobian(dm: DiscreteModel) -> tuple[sp.Matrix, _Stencil]:
     full = _stencil(dm, 2 * r, windows=r + 1 if constrained else 0)
     residual = engine.variation(full, r, range(r + 1))
     unknown = full.fs[-1]
-    J = residual.jacobian(unknown)
+    J = jacobian(residual, unknown)
     if constrained:
         phi = engine.window_values(full, r, dm.constraints)
-        J = sp.Matrix.vstack(sp.Matrix.hstack(J, residual.jacobian(full.multipliers[r])),
-                             sp.Matrix.hstack(phi.jacobian(unknown),
+        J = sp.Matrix.vstack(sp.Matrix.hstack(J, jacobian(residual, full.multipliers[r])),
+                             sp.Matrix.hstack(jacobian(phi, unknown),
                                               sp.zeros(len(phi), len(phi))))
     return J, full
 

@@ -15,6 +15,7 @@ through them.
 """
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from functools import lru_cache
 from typing import Callable
@@ -54,6 +55,11 @@ CAYLEY = Family("cay", (1 + _R**2 / 4) / (1 - _R**2 / 4), 1 / (1 - _R**2 / 4),
                 lambda n: sp.S.One if n == 0 else sp.Rational(1, 2 ** (n - 1)))
 DEXPINV = Family("dexpinv", _R / 2 * sp.coth(_R / 2), sp.Rational(-1, 2),
                  _bernoulli_over_factorial)
+
+
+#: The families by name (a coefficient's label starts with it).
+FAMILIES = {f.name: f for f in (EXP, CAYLEY, DEXPINV)}
+_LABEL = re.compile(r"(?P<family>[a-z]+)_(?P<a>\d+)_(?P<b>\d+)_c(?P<k>\d+)(?P<ds>(?:_ds)*)")
 
 
 class AnalyticCoefficient(sp.Function):
@@ -235,3 +241,18 @@ def used_coefficients(expressions) -> list[type[AnalyticCoefficient]]:
             found.add(type(e))
         stack.extend(e.args)
     return sorted(found, key=lambda c: c.__name__)
+
+
+def __getattr__(name: str) -> type[AnalyticCoefficient]:
+    """The coefficient class labelled ``name`` (``dexpinv_1_1_c0_ds``: family, a, b, k,
+    then one ``_ds`` per derivative), created on first use (PEP 562): pickle finds the
+    classes :func:`coefficients` creates by name, so derived expressions can be pickled."""
+    match = _LABEL.fullmatch(name)
+    family = FAMILIES.get(match["family"]) if match else None
+    a, b, k = (int(match[g]) for g in "abk") if family else (0, 0, -1)
+    if family is None or not 0 <= k < a + 2 * b:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    cls = coefficients(family, a, b)[k]
+    for _ in range(len(match["ds"]) // 3):
+        cls = derivative(cls)
+    return cls

@@ -1,0 +1,137 @@
+"""Jacobians computed in SymEngine, with SymPy expressions in and out.
+
+SymPy's ``diff`` spends most of a derivation asking every subexpression for its free
+symbols and assumptions (se3_body: 52 of 62 s in ``Matrix.jacobian``). SymEngine
+differentiates the same expressions in C++; the derivation keeps building its
+expressions in SymPy and hands each matrix to be differentiated across once, with its
+Jacobians and their chain-rule products computed on the SymEngine side and translated
+back once.
+
+Translation. Every free symbol becomes a SymEngine symbol with a fresh name (SymPy's
+``Dummy`` does not survive a round trip by itself), and every application c(s) of an
+analytic coefficient (:class:`~symvi.groupoids.analytic.AnalyticCoefficient`, which
+SymEngine does not know) becomes a symbol w; the chain rule through it is applied here,
+dF/dz = ∂F/∂z + ∂F/∂w · c′(s) · ds/dz, c′ again a coefficient
+(:func:`~symvi.groupoids.analytic.derivative`) standing for a symbol of its own, so
+Hessians differentiate through c′ in turn. A stand-in translates back to the very SymPy
+object it stands for (no substitution over the result). An expression SymEngine cannot translate
+(a function it does not know) is differentiated by SymPy instead.
+"""
+from __future__ import annotations
+
+import uuid
+from typing import Sequence
+
+import sympy as sp
+
+from ..groupoids.analytic import AnalyticCoefficient, derivative
+
+import symengine as se
+
+#: What SymEngine raises for an expression it cannot translate or differentiate.
+_UNTRANSLATABLE = (RuntimeError, TypeError, NotImplementedError)
+
+
+class _StandIn(se.Symbol):
+    """A SymEngine symbol that translates back to the SymPy object it stands for."""
+
+    def __init__(self, name: str, target: sp.Basic):
+        super().__init__(name)
+        self.target = target
+
+    def _sympy_(self):
+        return self.target
+
+
+class _Translation:
+    """Stand-ins for the symbols and coefficient applications of one computation."""
+
+    def __init__(self):
+        self.stand_ins: dict[sp.Basic, "_StandIn"] = {}
+        #: name of the stand-in of c(s) -> (the class of c, s in SymEngine)
+        self.applications: dict[str, tuple[type, object]] = {}
+
+    def _stand_in(self, atom: sp.Basic) -> "_StandIn":
+        if atom not in self.stand_ins:
+            # SymEngine caches derivatives by symbol name across calls, so a name must
+            # never stand for two things in one process
+            self.stand_ins[atom] = _StandIn(f"_z{uuid.uuid4().hex}", atom)
+        return self.stand_ins[atom]
+
+    def engine(self, M: sp.Matrix):
+        """M as a SymEngine matrix in stand-ins."""
+        mapping = {}
+        for c in M.atoms(AnalyticCoefficient):
+            w = self._stand_in(c)
+            if w.name not in self.applications:
+                self.applications[w.name] = (type(c), self.engine(sp.Matrix([c.args[0]]))[0])
+            mapping[se.sympify(c)] = w
+        for s in M.free_symbols:
+            mapping[se.sympify(s)] = self._stand_in(s)
+        return se.Matrix(M.rows, M.cols, [se.sympify(e).xreplace(mapping) for e in M])
+
+    def symbol(self, x: sp.Symbol):
+        return self._stand_in(x)
+
+    def derivative_of(self, name: str):
+        """The stand-in of c′(s) for the stand-in ``name`` of c(s)."""
+        cls, argument = self.applications[name]
+        w = self._stand_in(derivative(cls)(sp.sympify(argument)))
+        self.applications.setdefault(w.name, (derivative(cls), argument))
+        return w
+
+    @staticmethod
+    def sympy(M) -> sp.Matrix:
+        """A SymEngine matrix back in SymPy (each stand-in becomes what it stands for)."""
+        return sp.Matrix(M.rows, M.cols, [sp.sympify(e) for e in M])
+
+    def jacobian(self, F, z: Sequence):
+        """dF/dz of a SymEngine column F with respect to SymEngine symbols z."""
+        J = F.jacobian(se.Matrix(list(z)))
+        used = set().union(*(e.free_symbols for e in F)) if len(F) else set()
+        for w in sorted((s for s in used if s.name in self.applications), key=str):
+            _, argument = self.applications[w.name]
+            ds = self.jacobian(se.Matrix([argument]), z)
+            if any(e != 0 for e in ds):
+                J += F.diff(w) * self.derivative_of(w.name) * ds
+        return J
+
+
+def _column(M: sp.Matrix) -> sp.Matrix:
+    return M.reshape(len(M), 1)
+
+
+def jacobian(F: sp.Matrix, z: Sequence[sp.Symbol],
+             chain: Sequence[tuple[Sequence[sp.Symbol], sp.Matrix]] = ()) -> sp.Matrix:
+    """dF/dz + Σ ∂F/∂x · D over ``chain`` = [(x, D = dx/dz), …] (named intermediate
+    quantities x of the kernel, :func:`~symvi.derivation.derive._stencil`)."""
+    F = _column(sp.Matrix(F))
+    try:
+        t = _Translation()
+        Fe = t.engine(F)
+        J = t.jacobian(Fe, [t.symbol(s) for s in z])
+        for x, D in chain:
+            J += t.jacobian(Fe, [t.symbol(s) for s in x]) * t.engine(D)
+        return t.sympy(J)
+    except _UNTRANSLATABLE:
+        return _sympy_jacobian(F, z, chain)
+
+
+def gradient_and_hessian(f: sp.Expr, z: Sequence[sp.Symbol]) -> tuple[sp.Matrix, sp.Matrix]:
+    """The row ∂f/∂z and the matrix ∂²f/∂z² of a scalar f."""
+    try:
+        t = _Translation()
+        ze = [t.symbol(s) for s in z]
+        gradient = t.jacobian(t.engine(sp.Matrix([f])), ze)
+        hessian = t.jacobian(gradient.T, ze)
+        return t.sympy(gradient), t.sympy(hessian)
+    except _UNTRANSLATABLE:
+        gradient = sp.Matrix([f]).jacobian(z)
+        return gradient, gradient.T.jacobian(z)
+
+
+def _sympy_jacobian(F, z, chain) -> sp.Matrix:
+    J = F.jacobian(z)
+    for x, D in chain:
+        J += F.jacobian(x) * D
+    return J
