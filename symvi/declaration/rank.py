@@ -23,6 +23,8 @@ from typing import Sequence
 import numpy as np
 import sympy as sp
 
+from ..groupoids.analytic import used_coefficients
+
 #: Singular values below this fraction of a sample's scale count as zero.
 RELATIVE_TOLERANCE = 1e-10
 
@@ -36,34 +38,20 @@ def sequential_lambdify(args: Sequence[sp.Symbol],
     ``expr``: lambdify's ``cse`` hook takes the pairs as they are (one lambdify per
     definition cost seconds on the SE(3) models). The functions it calls that NumPy lacks
     (the exponential's coefficients) come with their own implementations (``_imp_``),
-    gathered here once: lambdify's own search for them walks the whole tree per call
-    (6 s on se3_body_exp's step Jacobian).
+    found by :func:`~symvi.groupoids.analytic.used_coefficients`, which visits each
+    distinct subexpression once: lambdify's own search walks the whole tree (6 s on
+    se3_body_exp's step Jacobian).
     """
     definitions = list(definitions)
 
     def with_definitions(exprs):
         common, reduced = sp.cse(exprs[0], symbols=sp.numbered_symbols("_rank_cse"))
         return definitions + common, reduced[0]
-    implementations = _implementations([expr] + [e for _, e in definitions])
+    applied = list(expr) if isinstance(expr, sp.MatrixBase) else [expr]
+    implementations = {c.__name__: c._imp_ for c in
+                       used_coefficients(applied + [e for _, e in definitions])}
     return sp.lambdify(list(args), (expr,), [implementations, "numpy"], use_imps=False,
                        cse=with_definitions)
-
-
-def _implementations(expressions) -> dict:
-    """{name: _imp_} of the functions applied in ``expressions`` that carry one, each
-    distinct subexpression visited once (derived expressions share subtrees heavily)."""
-    found, seen, stack = {}, set(), []
-    for e in expressions:
-        stack.extend(e if isinstance(e, sp.MatrixBase) else [e])
-    while stack:
-        e = stack.pop()
-        if e in seen:
-            continue
-        seen.add(e)
-        if isinstance(e, sp.Function) and hasattr(e, "_imp_"):
-            found[type(e).__name__] = e._imp_
-        stack.extend(e.args)
-    return found
 
 
 def generic_rank(matrix: sp.Matrix, symbols: Sequence[sp.Symbol],

@@ -14,19 +14,21 @@ SymEngine does not know) becomes a symbol w; the chain rule through it is applie
 dF/dz = ∂F/∂z + ∂F/∂w · c′(s) · ds/dz, c′ again a coefficient
 (:func:`~symvi.groupoids.analytic.derivative`) standing for a symbol of its own, so
 Hessians differentiate through c′ in turn. A stand-in translates back to the very SymPy
-object it stands for (no substitution over the result). An expression SymEngine cannot translate
-(a function it does not know) is differentiated by SymPy instead.
+object it stands for (no substitution over the result). A SymPy function SymEngine does
+not know (a Bessel function) is differentiated by SymPy's own rule through SymEngine's
+wrapper; what neither differentiates (Abs, undefined functions of the coordinates) the
+declaration refuses (:mod:`symvi.declaration.validation`), and an expression SymEngine
+cannot translate at all is differentiated by SymPy instead.
 """
 from __future__ import annotations
 
 import uuid
 from typing import Sequence
 
+import symengine as se
 import sympy as sp
 
 from ..groupoids.analytic import AnalyticCoefficient, derivative
-
-import symengine as se
 
 #: What SymEngine raises for an expression it cannot translate or differentiate.
 _UNTRANSLATABLE = (RuntimeError, TypeError, NotImplementedError)
@@ -51,7 +53,7 @@ class _Translation:
         #: name of the stand-in of c(s) -> (the class of c, s in SymEngine)
         self.applications: dict[str, tuple[type, object]] = {}
 
-    def _stand_in(self, atom: sp.Basic) -> "_StandIn":
+    def stand_in(self, atom: sp.Basic) -> "_StandIn":
         if atom not in self.stand_ins:
             # SymEngine caches derivatives by symbol name across calls, so a name must
             # never stand for two things in one process
@@ -62,21 +64,18 @@ class _Translation:
         """M as a SymEngine matrix in stand-ins."""
         mapping = {}
         for c in M.atoms(AnalyticCoefficient):
-            w = self._stand_in(c)
+            w = self.stand_in(c)
             if w.name not in self.applications:
                 self.applications[w.name] = (type(c), self.engine(sp.Matrix([c.args[0]]))[0])
             mapping[se.sympify(c)] = w
         for s in M.free_symbols:
-            mapping[se.sympify(s)] = self._stand_in(s)
+            mapping[se.sympify(s)] = self.stand_in(s)
         return se.Matrix(M.rows, M.cols, [se.sympify(e).xreplace(mapping) for e in M])
-
-    def symbol(self, x: sp.Symbol):
-        return self._stand_in(x)
 
     def derivative_of(self, name: str):
         """The stand-in of c′(s) for the stand-in ``name`` of c(s)."""
         cls, argument = self.applications[name]
-        w = self._stand_in(derivative(cls)(sp.sympify(argument)))
+        w = self.stand_in(derivative(cls)(sp.sympify(argument)))
         self.applications.setdefault(w.name, (derivative(cls), argument))
         return w
 
@@ -109,9 +108,9 @@ def jacobian(F: sp.Matrix, z: Sequence[sp.Symbol],
     try:
         t = _Translation()
         Fe = t.engine(F)
-        J = t.jacobian(Fe, [t.symbol(s) for s in z])
+        J = t.jacobian(Fe, [t.stand_in(s) for s in z])
         for x, D in chain:
-            J += t.jacobian(Fe, [t.symbol(s) for s in x]) * t.engine(D)
+            J += t.jacobian(Fe, [t.stand_in(s) for s in x]) * t.engine(D)
         return t.sympy(J)
     except _UNTRANSLATABLE:
         return _sympy_jacobian(F, z, chain)
@@ -121,7 +120,7 @@ def gradient_and_hessian(f: sp.Expr, z: Sequence[sp.Symbol]) -> tuple[sp.Matrix,
     """The row ∂f/∂z and the matrix ∂²f/∂z² of a scalar f."""
     try:
         t = _Translation()
-        ze = [t.symbol(s) for s in z]
+        ze = [t.stand_in(s) for s in z]
         gradient = t.jacobian(t.engine(sp.Matrix([f])), ze)
         hessian = t.jacobian(gradient.T, ze)
         return t.sympy(gradient), t.sympy(hessian)
