@@ -4,6 +4,7 @@ from __future__ import annotations
 import hashlib
 import os
 import pickle
+import threading
 
 # Small dense solves (SLSQP, Newton) run many times slower with threaded BLAS on a loaded
 # 2-core machine; pin it before NumPy is imported.
@@ -88,7 +89,9 @@ def shared_derivations(build_dir):
         except (FileNotFoundError, EOFError, pickle.UnpicklingError):
             pass
         derived = own(dm)
-        partial = path.with_name(f"{path.name}.{os.getpid()}.partial")
+        # one partial file per process and thread: threads of one process (the build
+        # tests' concurrent compiles) derive the same model at once
+        partial = path.with_name(f"{path.name}.{os.getpid()}.{threading.get_ident()}.partial")
         partial.write_bytes(pickle.dumps(derived))
         os.replace(partial, path)
         return derived

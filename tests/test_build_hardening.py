@@ -251,7 +251,7 @@ def test_threads_build_in_one_process_reproducibly(tmp_path, capfd):
     digests, failures = [], []
 
     def rounds(i: int) -> None:
-        for _ in range(5):
+        for _ in range(2):      # 8 builds, always 2–4 at once (the C compiles overlap)
             try:
                 module = compile_model(model, tmp_path / f"d{i}", force=True)
                 assert works(module)
@@ -266,7 +266,7 @@ def test_threads_build_in_one_process_reproducibly(tmp_path, capfd):
     for t in threads:
         t.join()
     assert failures == []
-    assert len(digests) == 20 and len(set(digests)) == 1    # bitwise-identical extensions
+    assert len(digests) == 8 and len(set(digests)) == 1     # bitwise-identical extensions
     assert os.getcwd() == cwd
     assert capfd.readouterr() == ("", "")                    # nothing on fds 1 and 2
 
@@ -296,7 +296,7 @@ def test_reader_never_sees_the_package_missing_during_rebuilds(pristine, tmp_pat
     reader = subprocess.Popen([sys.executable, "-c", READER, str(out / NAME), key, str(stop)],
                               stdout=subprocess.PIPE, text=True)
     try:
-        for _ in range(10):
+        for _ in range(4):      # each swap is a chance to be seen; ~10⁴ polls meanwhile
             compile_model(tiny(), out, force=True)
     finally:
         stop.touch()

@@ -21,14 +21,12 @@ for constrained models, whose discrete constraints give h·Φ + O(h³).
 from __future__ import annotations
 
 import random
-from types import SimpleNamespace
 
 import pytest
 import sympy as sp
 from sympy.core.function import AppliedUndef
 
 from curves import curve as _f, derivative as _d, parameters as _params
-from conftest import BUNDLED
 from symvi import (SO3, ActionGroupoid, Groupoid, MatrixLieGroup, Model, PairGroupoid,
                    ProductGroupoid, h)
 from symvi.checks import Context, check, run_check
@@ -232,43 +230,6 @@ def test_constrained_residual_and_constraints_are_consistent(derived):
 # ---------------------------------------------------------------------------------------
 # 3. The check
 # ---------------------------------------------------------------------------------------
-#: Models whose full derivation takes 20–30 s (Jacobians, momenta, regularity); the check
-#: reads only the step residual, derived here alone in about 2 s.
-STEP_ONLY = {"se3_body", "se3_body_exp"}
-
-
-def _step_only(model):
-    """A stand-in for derive(discretise(model)) holding the step kernel's residual only
-    (unconstrained models), built with the engine of symvi.derivation.derive."""
-    from symvi.derivation.derive import Kernel, _Engine, _stencil
-    dm = discretise(model)
-    full = _stencil(dm, 2 * dm.order)
-    residual = _Engine(dm).variation(full, dm.order, range(dm.order + 1))
-    kernel = Kernel("step", full.z, (("residual", residual),), "residual", full.definitions)
-    return SimpleNamespace(kernels=(kernel,), kernel=lambda name: kernel, order=dm.order,
-                           step=dm.step, constraint_count=0, fibre_dim=dm.groupoid.fibre_dim)
-
-
-def _context(name, derived):
-    ctx = Context(get(name))
-    # share the session's derivation
-    ctx.__dict__["derived"] = _step_only(ctx.model) if name in STEP_ONLY else derived(name)
-    return ctx
-
-
-@pytest.mark.parametrize("name", BUNDLED)
-def test_every_bundled_model_passes_in_bounded_time(name, derived):
-    result = run_check("consistency", _context(name, derived))
-    assert result.status == "pass", (result.summary, result.details)
-    data = result.data
-    assert (data["power"], data["sign"], data["order"], data["next_power"]) == (1, 1, 2, 3)
-    assert data["seconds"] < 20
-    assert result.summary.startswith("consistent: R = +h^1·E + O(h^3) (order 2)")
-    if get(name).constraints:
-        assert data["constraints"]["power"] == 1 and data["constraints"]["order"] == 2
-        assert "constraints Φ_d = +h^1·Φ + O(h^3) (order 2)" in result.summary
-
-
 def test_report_is_json():
     report = check(get("so3_cubic"), only=["consistency"])
     assert '"order": 2' in report.to_json()

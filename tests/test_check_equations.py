@@ -226,7 +226,7 @@ def test_errata_4_to_6_heavy_top(heavy_report):
 def test_cli_fixture_fails_and_bundled_model_skips(capsys):
     assert main(["check", "paper_rigid_body", "--only", "equations"]) == 1
     out = capsys.readouterr().out
-    assert "FAIL  equations" in out and "CuerpoRigido" in out
+    assert "FAIL  equations" in out and "CuerpoRigido" in out and "agree:" in out
     assert main(["check", "rigid_body_oc", "--only", "equations"]) == 0
     assert "SKIP  equations" in capsys.readouterr().out
 

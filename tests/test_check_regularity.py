@@ -1,19 +1,10 @@
 """Check ``regularity``: the step-defining matrix is generically non-singular (paper §4.3)."""
 from __future__ import annotations
 
-import pytest
 
 from symvi import Model, PairGroupoid, h
 from symvi.checks import check
 from symvi.models import get
-
-
-@pytest.mark.parametrize("name", ["pendulum", "cubic_spline", "rigid_body", "heavy_top",
-                                  "so3_cubic", "cart_pole_oc", "heavy_top_rotors_oc"])
-def test_bundled_models_are_regular(name):
-    result = check(get(name), only=["regularity"])["regularity"]
-    assert result.status == "pass", result.summary
-    assert result.data["rank"] == result.data["size"]
 
 
 def test_pendulum_singular_locus_is_stated():
@@ -21,11 +12,6 @@ def test_pendulum_singular_locus_is_stated():
     assert result.summary.startswith("D₁₂L_d (1×1) has full rank 1")
     # D₁₂L_d = −m l²/h + (h m g l/4) cos((θ₁+θ₂)/2): singular where 4l + g h² cos(…) = 0.
     assert "g*h**2*cos(theta_1/2 + theta_2/2) + 4*l" in result.summary
-
-
-def test_constrained_problems_use_the_bordered_matrix():
-    result = check(get("cart_pole_oc"), only=["regularity"])["regularity"]
-    assert result.summary.startswith("bordered step matrix (3×3)")
 
 
 def test_a_degenerate_direction_is_caught_and_named():

@@ -3,7 +3,6 @@ residual of the derivation engine."""
 from __future__ import annotations
 
 import mpmath
-import pytest
 import sympy as sp
 
 from symvi import SO3, ActionGroupoid, Model, PairGroupoid
@@ -15,23 +14,6 @@ from symvi.models import get
 
 def _routes(model):
     return run_check("routes", Context(model))
-
-
-@pytest.mark.parametrize("name, order", [
-    ("pendulum", 1),              # pair, first order
-    ("cubic_spline", 2),          # pair, second order
-    ("rigid_body", 1),            # Lie group, Cayley
-    ("rigid_body_exp", 1),        # Lie group, exponential
-    ("so3_cubic", 2),             # Lie group, second order
-    ("heavy_top", 1),             # action groupoid
-    ("heavy_top_rotors_oc", 2),   # action × pair, constrained (augmented L_d + λΦ_d)
-])
-def test_routes_agree_on_bundled_models(name, order):
-    result = _routes(get(name))
-    assert result.status == "pass", result.details
-    assert result.data["order"] == order
-    assert result.data["max_relative_difference"] < 1e-28
-    assert ("+R" if order == 1 else "−R") in result.data["convention"]
 
 
 # -- the paper's pair-groupoid example (§4.2) ----------------------------------------------

@@ -39,8 +39,9 @@ class LiftedSystem:
         self.model, self.n_nodes = model, n_nodes
         self.bw = int(model.lib.symvi_lifted_bandwidth())
         size = int(model.lib.symvi_lifted_unknowns(n_nodes))
-        self.band = np.zeros((3 * self.bw + 1, size), order="F")
-        self.work = np.zeros_like(self.band, order="F")
+        # both written whole before they are read (the assembly zeroes the band)
+        self.band = np.empty((3 * self.bw + 1, size), order="F")
+        self.work = np.empty_like(self.band, order="F")
         n = model.n
         # η_t of the node layout's block t − 2 sits at (t − 1)·3n in the lifted layout
         nodes = np.arange(2, n_nodes - 2)

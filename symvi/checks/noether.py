@@ -60,11 +60,25 @@ def leading_defect(dm, symmetry) -> sp.Expr:
     for symbol, expr in reversed(window.definitions):
         defect = defect.xreplace({symbol: expr})
     h = dm.step
-    for power in range(-2, 4):     # a kinetic term of L_d carries 1/h
-        lead = sp.simplify(sp.cancel(defect / h**power).xreplace({h: 0}))
-        if lead != 0:
-            break
+    numerator, denominator = sp.fraction(sp.cancel(defect))
+    try:
+        (p, a), (q, b) = _lowest_term(numerator, h), _lowest_term(denominator, h)
+        lead, power = sp.simplify(a / b), p - q
+    except sp.PolynomialError:      # h inside a function (the exponential's coefficients)
+        for power in range(-2, 4):     # a kinetic term of L_d carries 1/h
+            lead = sp.simplify(sp.cancel(defect / h**power).xreplace({h: 0}))
+            if lead != 0:
+                break
     return (lead * h**power).xreplace(readable(window, dm.groupoid))
+
+
+def _lowest_term(polynomial: sp.Expr, h: sp.Symbol) -> tuple[int, sp.Expr]:
+    """(k, c_k) of the lowest power of h with a nonzero coefficient; one cancellation of
+    the whole defect instead of one per trial power (heavy top: 3 s instead of 11 s)."""
+    for (k,), c in reversed(sp.Poly(polynomial, h).terms()):
+        if sp.simplify(c) != 0:
+            return k, c
+    return 0, sp.S.Zero
 
 
 def run(ctx) -> CheckResult:

@@ -31,8 +31,9 @@ def singular_locus(J: sp.Matrix, names: dict) -> list[sp.Expr] | None:
     """Non-constant factors of det J (None when the determinant is too costly)."""
     if J.shape[0] > _DETERMINANT_SIZE or sum(sp.count_ops(e) for e in J) > _DETERMINANT_OPS:
         return None
-    det = sp.factor(sp.cancel(J.det(method="berkowitz")))
-    numerator, _ = sp.fraction(det)
+    # factored once: factor_list of the cancelled numerator (not of factor()'s result,
+    # which would factor the same polynomial twice)
+    numerator, _ = sp.fraction(sp.cancel(J.det(method="berkowitz")))
     _, factors = sp.factor_list(numerator)
     return [f.xreplace(names) for f, _ in factors if f.free_symbols]
 

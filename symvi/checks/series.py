@@ -476,7 +476,7 @@ def _is_zero(expr: sp.Expr) -> bool:
     expr = sp.expand(expr)
     if expr == 0:
         return True
-    verdicts = [_vanishes_at(expr, seed) for seed in (0, 1)]
+    verdicts = [vanishes_at(expr, seed) for seed in (0, 1)]
     if False in verdicts:
         return False
     small = sp.count_ops(expr) < 400
@@ -487,7 +487,7 @@ def _is_zero(expr: sp.Expr) -> bool:
     return True
 
 
-def _vanishes_at(expr: sp.Expr, seed: int) -> bool | None:
+def vanishes_at(expr: sp.Expr, seed: int) -> bool | None:
     """Whether ``expr`` is zero at a random point (None: could not tell)."""
     import random
     rng = random.Random(seed * 7919 + 17)

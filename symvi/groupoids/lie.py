@@ -192,8 +192,8 @@ class MatrixLieGroup(Groupoid):
     # -- structure maps (paper §2.1), for ``symvi check`` ---------------------------------
     # Computed from the definition of the retraction, not from :mod:`.retraction`'s closed
     # forms or dτ⁻¹: Cayley by a linear solve (any entries, meant for numbers: symbolic
-    # entries give large expressions), the exponential numerically with mpmath's expm/logm
-    # at the current ``mpmath.mp.dps`` (numeric entries only).
+    # entries give large expressions), the exponential numerically with mpmath's expm and
+    # the series of :func:`_logm` at the current ``mpmath.mp.dps`` (numeric entries only).
     def group_element(self, x) -> sp.Matrix:
         """τ(X), X = Σ x_a E_a: (I − X/2)⁻¹(I + X/2) or exp(X)."""
         X, eye = self.hat(x), sp.eye(self.matrix_dim)
@@ -209,7 +209,7 @@ class MatrixLieGroup(Groupoid):
         if self.retraction.name == "cayley":
             X = 2 * (W + eye).LUsolve(W - eye)
         elif self.retraction.name == "exp" and _numeric(W):
-            X = _from_mp(mpmath.logm(_to_mp(W)))
+            X = _from_mp(_logm(_to_mp(W)))
         else:
             raise NotImplementedError(f"{self!r}: no τ⁻¹ for symbolic matrices")
         return tuple(self.coordinates(X))
@@ -222,8 +222,10 @@ class MatrixLieGroup(Groupoid):
         return (), tuple(v / h for v in self.algebra_coordinates(W))
 
     def inverse(self, x, f, h):
-        W = self.group_element([h * v for v in f])
-        return (), tuple(v / h for v in self.algebra_coordinates(W.inv()))
+        """τ(hξ)⁻¹ = τ(−hξ), a property of every retraction (paper §2.1, after its
+        definition), so i(ξ) = −ξ; ``multiply`` computes products from τ and τ⁻¹
+        themselves, and the routes check confirms m(g, i(g)) = ε numerically."""
+        return (), tuple(-v for v in f)
 
     def basis_curve(self, x, a, eps, h):
         """σ_a(ε) = τ(εE_a), whose coordinate is ξ = τ⁻¹(τ(εE_a))/h = ε e_a / h."""
@@ -327,6 +329,33 @@ def _numeric(M: sp.Matrix) -> bool:
 def _to_mp(M: sp.Matrix):
     return mpmath.matrix([[mpmath.mpf(sp.Float(sp.N(v, mpmath.mp.dps), mpmath.mp.dps)._mpf_)
                            for v in M.row(i)] for i in range(M.rows)])
+
+
+def _logm(W):
+    """Principal logarithm of the mpmath matrix W at the working precision.
+
+    log W = 2 artanh Z = 2 Σ Z^{2k+1}/(2k+1), Z = (W − I)(W + I)⁻¹, converges to the
+    principal logarithm when ‖Z‖ < 1, each term a factor ‖Z‖² smaller: for the checks'
+    near-identity products (‖Z‖ ≲ 0.3) a few dozen products instead of mpmath's
+    repeated square roots (``logm``: a Denman–Beavers iteration per halving, then the
+    series of log(I + X); the routes check on an exponential-map model spent most of
+    its time there). mpmath's ``logm`` takes the matrices this series would converge
+    slowly for (‖Z‖ > 1/2).
+    """
+    with mpmath.extraprec(10):
+        eye = mpmath.eye(W.rows)
+        Z = (W - eye) * mpmath.inverse(W + eye)
+        ratio = mpmath.mnorm(Z, 1)
+        if ratio > 0.5:
+            return mpmath.logm(W)
+        # terms k > K are below ε‖Z‖ together: ratio^{2K} ≤ ε (1 − ratio²)
+        K = 0 if ratio == 0 else int(mpmath.ceil(mpmath.log(mpmath.eps * (1 - ratio**2))
+                                                 / (2 * mpmath.log(ratio))))
+        Z2, term, total = Z * Z, Z, Z
+        for k in range(1, K + 1):
+            term = term * Z2
+            total += term / (2 * k + 1)
+        return 2 * total
 
 
 def _from_mp(M) -> sp.Matrix:
