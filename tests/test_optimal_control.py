@@ -395,9 +395,9 @@ def test_newton_out_of_iterations_reports_its_history(compiled):
 
 def test_newton_matrix_conditioning_and_its_limit(compiled):
     """The whole-trajectory Newton matrix of a second-order problem is a fourth-difference
-    operator: the estimate of 1/κ₁ (``onenormest`` on banded LU solves, within 10 % of
-    LAPACK's dgbcon, which is O(N²) on these factors) falls like N⁻⁴ (measured at the chord
-    guess). Past ε its solves are rounding noise — at N = 60 000 for the rigid body — and
+    operator: the estimate of 1/κ₁ (LAPACK's dgbcon at these sizes: deterministic, where
+    SciPy's randomised ``onenormest`` once measured an order of 3.7) falls like N⁻⁴
+    (measured at the chord guess). Past ε its solves are rounding noise — at N = 60 000 for the rigid body — and
     a failed solve there names that cause; an ordinary failure (out of iterations at
     N = 200) does not. By default such N are solved with the lifted system (κ ∝ N²,
     tests/test_lifted.py), which converges at N = 10⁵ (tests/test_false_success.py)."""

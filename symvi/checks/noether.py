@@ -20,6 +20,7 @@ from ..derivation.derive import invariance_defect
 from ..discretisation.discretise import mechanical_model
 from ..declaration.rank import sequential_lambdify
 from .report import CheckResult
+from .series import _Expander, expansion_scope
 
 NAME = "noether"
 #: Relative size of the defect, against the sum of the magnitudes of its terms, below which
@@ -52,33 +53,20 @@ def defect_samples(dm, symmetry, seed: int, samples: int = _SAMPLES) -> list[tup
     return out
 
 
+@expansion_scope
 def leading_defect(dm, symmetry) -> sp.Expr:
     """The lowest-order term in h of δL_d − Δf, simplified: the continuous defect, which
-    names the terms of the Lagrangian that break the symmetry."""
+    names the terms of the Lagrangian that break the symmetry. Found by the checks'
+    Laurent series in h (:mod:`.series`), which expands the window's base points on
+    demand and the exponential's coefficients through their Taylor series (cancelling
+    the substituted defect and setting h = 0 took one cancellation per trial power and
+    gave 0/0 for the exponential)."""
     terms, window = invariance_defect(dm, symmetry)
-    defect = sum(terms, sp.S.Zero)
-    for symbol, expr in reversed(window.definitions):
-        defect = defect.xreplace({symbol: expr})
-    h = dm.step
-    numerator, denominator = sp.fraction(sp.cancel(defect))
-    try:
-        (p, a), (q, b) = _lowest_term(numerator, h), _lowest_term(denominator, h)
-        lead, power = sp.simplify(a / b), p - q
-    except sp.PolynomialError:      # h inside a function (the exponential's coefficients)
-        for power in range(-2, 4):     # a kinetic term of L_d carries 1/h
-            lead = sp.simplify(sp.cancel(defect / h**power).xreplace({h: 0}))
-            if lead != 0:
-                break
-    return (lead * h**power).xreplace(readable(window, dm.groupoid))
-
-
-def _lowest_term(polynomial: sp.Expr, h: sp.Symbol) -> tuple[int, sp.Expr]:
-    """(k, c_k) of the lowest power of h with a nonzero coefficient; one cancellation of
-    the whole defect instead of one per trial power (heavy top: 3 s instead of 11 s)."""
-    for (k,), c in reversed(sp.Poly(polynomial, h).terms()):
-        if sp.simplify(c) != 0:
-            return k, c
-    return 0, sp.S.Zero
+    defect = sp.Add(*terms)
+    expander = _Expander(dm.step, {}, dict(window.definitions))
+    power = expander.true_order(defect)
+    lead = sp.simplify(expander.series(defect, power).coefficient(power))
+    return (lead * dm.step**power).xreplace(readable(window, dm.groupoid))
 
 
 def run(ctx) -> CheckResult:

@@ -333,10 +333,11 @@ class _Expander:
             return int(expr.exp)
         if expr.is_Pow and expr.exp.is_Integer:
             # 1/b^m: the lower bound of b gives no bound for 1/b; find b's true order.
-            return int(expr.exp) * self._true_order(expr.base)
+            return int(expr.exp) * self.true_order(expr.base)
         return 0  # analytic function of an argument that is O(1)
 
-    def _true_order(self, expr: sp.Expr) -> int:
+    def true_order(self, expr: sp.Expr) -> int:
+        """The lowest power of h with a coefficient that is not zero."""
         guess = self.valuation(expr)
         for extra in range(0, 8):
             s = self.series(expr, guess + extra)
@@ -404,14 +405,14 @@ class _Expander:
         if m > 0:
             return self._product([base] * m, limit)
         m = -m
-        w = self._true_order(base)
+        w = self.true_order(base)
         # base = c h^w (1 + u), u = O(h): base^{-m} = c^{-m} h^{-mw} Σ_j binom(−m, j) u^j.
         need = limit + m * w
         if need < 0:  # base^{-m} = O(h^{-mw}) has no term through h^limit
             return _Series({}, limit)
         b = self.series(base, w + need)
         inverse = b.terms[w].inverse()
-        # (terms below h^w are zero: non-canonical forms of 0 that _true_order skipped)
+        # (terms below h^w are zero: non-canonical forms of 0 that true_order skipped)
         u = _truncate({p - w: cp * inverse for p, cp in b.terms.items() if p > w},
                       b.prec - w)
         total = _series_of({0: 1}, _EXACT)

@@ -344,7 +344,10 @@ def _logm(W):
     """
     with mpmath.extraprec(10):
         eye = mpmath.eye(W.rows)
-        Z = (W - eye) * mpmath.inverse(W + eye)
+        try:
+            Z = (W - eye) * mpmath.inverse(W + eye)
+        except ZeroDivisionError:   # an eigenvalue −1: no principal logarithm
+            return mpmath.logm(W)
         ratio = mpmath.mnorm(Z, 1)
         if ratio > 0.5:
             return mpmath.logm(W)
