@@ -26,7 +26,8 @@ def test_every_check_passes_or_does_not_apply_on_bundled_models(name, capsys):
     statuses = {c: r["status"] for c, r in results.items()}
     assert all(statuses[c] == "pass" for c in ("algebroid", "routes", "consistency",
                                                "regularity")), statuses
-    order = get(name).order
+    model = get(name)
+    order = model.order
     routes = results["routes"]["data"]
     # the Σ_{L_d} route of paper §4.2 agrees with the engine's residual to 50 digits
     assert routes["order"] == order and routes["max_relative_difference"] < 1e-28
@@ -36,12 +37,12 @@ def test_every_check_passes_or_does_not_apply_on_bundled_models(name, capsys):
     assert (data["power"], data["sign"], data["order"], data["next_power"]) == (1, 1, 2, 3)
     assert data["seconds"] < 20
     assert consistency["summary"].startswith("consistent: R = +h^1·E + O(h^3) (order 2)")
-    if get(name).constraints:
+    if model.constraints:
         assert data["constraints"]["power"] == 1 and data["constraints"]["order"] == 2
         assert "constraints Φ_d = +h^1·Φ + O(h^3) (order 2)" in consistency["summary"]
     regularity = results["regularity"]["data"]
     assert regularity["rank"] == regularity["size"]
-    if get(name).constraints:       # the step matrix bordered by the constraints' Jacobian
+    if model.constraints:       # the step matrix bordered by the constraints' Jacobian
         assert results["regularity"]["summary"].startswith("bordered step matrix")
 
 
