@@ -2,7 +2,7 @@
 
 The residual at node j involves nodes j−r … j+r, so the Jacobian is block-banded: C
 assembles it in LAPACK's band storage (ab[2 bw + row − col, col] = J[row, col]) and
-``dgbsv`` factorises it, so one iteration costs O(N). The unknowns are corrections η_j of
+its banded LU (:mod:`.band`) solves for the corrections, so one iteration costs O(N). The unknowns are corrections η_j of
 the free nodes, applied as the node variation g → g·τ(η), and with constraints the
 multipliers λ^k of every window (paper §3.2, eq. ``constrainedso``), interleaved per node.
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .band import reciprocal_condition
+from .band import factor, lu_solve, reciprocal_condition
 from .gauge import Gauge
 from .lifted import LIFT_FROM, LiftedSystem
 from .optimality import positive_definite
@@ -72,21 +72,16 @@ class Problem:
 
     def solve(self, ab, bw: int, rhs: np.ndarray, shift: float = 0.0,
               shifted: np.ndarray | None = None, at: Path | None = None) -> np.ndarray:
-        """Solve (J + shift·D) x = rhs with LAPACK's banded LU (dgbsv), J in the band
+        """Solve (J + shift·D) x = rhs by banded LU (:func:`.band.factor`), J in the band
         storage of :meth:`assemble` (left intact: the work copy is factorised), D the
         identity on the unknowns ``shifted`` (a mask; default all). Exactly dependent
         constraints are replaced by their gauge condition (:mod:`.gauge`), posed at the
         path ``at`` (default: where J was assembled)."""
-        from scipy.linalg import LinAlgError
-        from scipy.linalg.lapack import dgbsv
-
         if self._lifted is not None:
             return self._lifted.solve(rhs, shift, shifted)
         rhs = self._newton_matrix(ab, bw, rhs, shift, shifted, at)
-        _, _, x, info = dgbsv(bw, bw, self._work, rhs, overwrite_ab=True)
-        if info != 0:
-            raise LinAlgError(f"dgbsv: singular at column {info}" if info > 0 else "dgbsv")
-        return x
+        pivots = factor(self.model, self._work, bw, "band LU of the Newton matrix")
+        return lu_solve(self.model, self._work, bw, pivots, np.array(rhs, dtype=float))
 
     @property
     def lifted_system(self) -> LiftedSystem | None:

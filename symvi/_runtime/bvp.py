@@ -147,6 +147,11 @@ def _finite(result: BVPResult) -> BVPResult:
     return result
 
 
+#: Below this many steps a Newton matrix singular to working precision is not the
+#: conditioning's growth with N (heavy_top_rotors_oc_variational at N = 4: 1/κ = 0).
+FEW_STEPS = 50
+
+
 def _conditioning(problem: Problem, path: Path, status: Status) -> str:
     """Why Newton failed, when the reason is double precision itself: the Newton matrix
     at the returned path is singular to working precision (1/κ < ε). Its conditioning
@@ -159,9 +164,11 @@ def _conditioning(problem: Problem, path: Path, status: Status) -> str:
     if rcond >= np.finfo(float).eps:
         return ""
     growth = 2 if problem.lifted_system is not None else 2 * problem.model.order
-    return (f"; the Newton matrix is singular to working precision (reciprocal condition "
-            f"number {rcond:.1e} < ε), so rounding may dominate its solves: its "
-            f"conditioning grows like N^{growth} — use fewer steps")
+    text = (f"; the Newton matrix is singular to working precision (reciprocal condition "
+            f"number {rcond:.1e} < ε), so rounding may dominate its solves")
+    if path.x.shape[0] - 1 < FEW_STEPS:     # not the growth with N: a degenerate problem
+        return text + " — with so few steps the discrete problem is degenerate; use more"
+    return text + f": its conditioning grows like N^{growth} — use fewer steps"
 
 
 def _result(model, path: Path, p, h, common: dict) -> BVPResult:

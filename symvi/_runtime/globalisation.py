@@ -133,14 +133,18 @@ def natural_step(problem, state, delta, ab, bw: int, size: float):
 
 
 def line_search(problem, state, delta, res, min_alpha: float = 2.0**-12):
-    """Backtrack α = 1, ½, … until ‖R‖₂ decreases (Armijo, c = 1e-4)."""
-    base = float(np.dot(res, res))
+    """Backtrack α = 1, ½, … until ‖R‖₂ decreases (Armijo on ½‖R‖², c = 1e-4). The norms
+    by BLAS's scaled dnrm2: a residual of 1e160 (a degenerate problem far from any
+    solution) must compare, not overflow in a dot product."""
+    from scipy.linalg.blas import dnrm2
+
+    base = float(dnrm2(res))
     alpha = 1.0
     while alpha >= min_alpha:
         trial = problem.moved(state, delta, alpha)
         if trial is not None:
             trial_res, _, _, finite = problem.assemble(trial, False)
-            if finite and float(np.dot(trial_res, trial_res)) <= (1 - 1e-4 * alpha) * base:
+            if finite and float(dnrm2(trial_res)) <= np.sqrt(1 - 1e-4 * alpha) * base:
                 return trial, alpha * float(np.abs(delta).max(initial=0.0))
         alpha /= 2
     return state, None

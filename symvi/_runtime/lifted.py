@@ -19,7 +19,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .band import product
+from .band import factor, lu_solve, residual
 
 #: Most steps of iterative refinement after a solve whose componentwise backward error
 #: exceeds 4ε: at N = 10⁶ (κ ≈ 10¹³ equilibrated) one LU solve can leave errors in the
@@ -47,6 +47,10 @@ class LiftedSystem:
         nodes = np.arange(2, n_nodes - 2)
         self.eta = ((nodes[:, None] - 1) * 3 * n + np.arange(n)).reshape(-1)
         self._factored = self._scaling = None
+        # right-hand side, solution, residual, its scale: kept, because fresh vectors of
+        # this size are fresh pages, and faulting them in cost a quarter of a solve at
+        # N = 10⁵ (63 000 page faults a solve_bvp)
+        self._vectors = tuple(np.zeros(size) for _ in range(4))
 
     def assemble(self, path, p, h: float) -> bool:
         """The lifted matrix at ``path``; False on a non-finite entry."""
@@ -61,52 +65,44 @@ class LiftedSystem:
         """η with (J + shift·D) η = rhs, D the identity on the node unknowns ``shifted``
         (a mask in the node layout; default all). The LU is kept for further solves with
         the same shift until the next assembly (a simplified Newton step reuses it)."""
-        from scipy.linalg import LinAlgError
-        from scipy.linalg.lapack import dgbtrf, dgbtrs
-
         key = (shift, None if shifted is None or not shift else shifted.tobytes())
         if self._factored is None or self._factored[0] != key:
-            np.copyto(self.work, self.band)
-            if shift:
-                self.work[2 * self.bw, self.eta] += shift if shifted is None else shift * shifted
-            if self._scaling is None:
-                self._scaling = self._equilibrate()
-            else:
-                _scale(self.work, self.bw, *self._scaling)
-            lu, pivots, info = dgbtrf(self.work, self.bw, self.bw, overwrite_ab=True)
-            if info != 0:
-                self._factored = None
-                raise LinAlgError(f"dgbtrf (lifted system): singular at column {info}"
-                                  if info > 0 else "dgbtrf (lifted system)")
-            self._factored = (key, lu, pivots)
-        _, lu, pivots = self._factored
-        rows, cols = self._scaling
-
-        def solve(b):
-            y, info = dgbtrs(lu, self.bw, self.bw, rows * b, pivots)
-            if info != 0:
-                raise LinAlgError("dgbtrs (lifted system)")
-            return cols * y
-        full = np.zeros(self.band.shape[1])
-        full[self.eta] = rhs
-        x = solve(full)
+            self._factor(key, shift, shifted)
+        _, lu, pivots, diagonal = self._factored
+        b, x, r, s = self._vectors
+        b.fill(0.0)
+        b[self.eta] = rhs
+        self._lu_solve(lu, pivots, b, x)
         for _ in range(REFINEMENTS):
-            residual, size = self._residual(full, x, shift, shifted)
-            if np.all(np.abs(residual) <= 4 * np.finfo(float).eps * size):
+            error = residual(self.model, self.band, self.bw, x, b, (r, s), diagonal)
+            if error <= 4 * np.finfo(float).eps:
                 break       # backward stable already (N ≤ 10⁵ after equilibration)
-            x += solve(residual)
+            x += self._lu_solve(lu, pivots, r, r)
         return x[self.eta]
 
-    def _residual(self, b: np.ndarray, x: np.ndarray, shift: float, shifted):
-        """(b − A x, |A| |x| + |b|), A the lifted matrix + shift on the node unknowns: the
-        componentwise backward error of x is max |b − A x| / (|A| |x| + |b|)."""
-        m, diagonal = self.model, (shift if shifted is None else shift * shifted)
-        ax = product(m, self.band, self.bw, x)
-        size = product(m, self.band, self.bw, x, absolute=True) + np.abs(b)
+    def _factor(self, key, shift: float, shifted: np.ndarray | None) -> None:
+        """LU of the equilibrated (and shifted) lifted matrix in the work band."""
+        self._factored = None
+        np.copyto(self.work, self.band)
+        diagonal = None
         if shift:
-            ax[self.eta] += diagonal * x[self.eta]
-            size[self.eta] += np.abs(diagonal * x[self.eta])
-        return b - ax, size
+            diagonal = np.zeros(self.band.shape[1])
+            diagonal[self.eta] = shift if shifted is None else shift * shifted
+            self.work[2 * self.bw] += diagonal
+        if self._scaling is None:
+            self._scaling = self._equilibrate()
+        else:
+            _scale(self.work, self.bw, *self._scaling)
+        pivots = factor(self.model, self.work, self.bw, "band LU of the lifted system")
+        self._factored = (key, self.work, pivots, diagonal)
+
+    def _lu_solve(self, lu, pivots, b: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """out = C (R A C)⁻¹ R b = A⁻¹ b from the equilibrated LU (``out`` may be ``b``)."""
+        rows, cols = self._scaling
+        np.multiply(rows, b, out=out)
+        lu_solve(self.model, lu, self.bw, pivots, out)
+        out *= cols
+        return out
 
     def _equilibrate(self, sweeps: int = 2) -> tuple[np.ndarray, np.ndarray]:
         """Scale the work band in place to R A C by Ruiz's iteration (C:
