@@ -29,14 +29,17 @@ def residual(model, band: np.ndarray, bw: int, x: np.ndarray, b: np.ndarray,
         model.ptr(x), model.ptr(b), model.ptr(r), model.ptr(s)))
 
 
-def factor(model, work: np.ndarray, bw: int, what: str) -> np.ndarray:
+def factor(model, work: np.ndarray, bw: int, what: str,
+           pivots: np.ndarray | None = None) -> np.ndarray:
     """LU of the band matrix in ``work`` (LAPACK storage, 3 bw + 1 rows, Fortran order), in
     place, by ``symvi_band_factor`` (LAPACK's dgbtf2 without its per-column BLAS calls:
-    rigid_body_oc at N = 1000, 0.64 ms with dgbsv against 0.15 ms); returns the pivots.
-    Raises LinAlgError naming ``what`` and the column of a zero pivot."""
+    rigid_body_oc at N = 1000, 0.64 ms with dgbsv against 0.15 ms); returns the pivots
+    (written into ``pivots``, C ints, when given). Raises LinAlgError naming ``what`` and
+    the column of a zero pivot."""
     from scipy.linalg import LinAlgError
 
-    pivots = np.empty(work.shape[1], dtype=np.intc)
+    if pivots is None:
+        pivots = np.empty(work.shape[1], dtype=np.intc)
     info = model.lib.symvi_band_factor(model.ptr(work.T), work.shape[1], bw,
                                        model.ffi.from_buffer("int[]", pivots))
     if info != 0:

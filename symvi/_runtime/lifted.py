@@ -47,10 +47,12 @@ class LiftedSystem:
         nodes = np.arange(2, n_nodes - 2)
         self.eta = ((nodes[:, None] - 1) * 3 * n + np.arange(n)).reshape(-1)
         self._factored = self._scaling = None
-        # right-hand side, solution, residual, its scale: kept, because fresh vectors of
-        # this size are fresh pages, and faulting them in cost a quarter of a solve at
-        # N = 10⁵ (63 000 page faults a solve_bvp)
+        # Kept: right-hand side, solution, residual and its scale; R, C and the
+        # equilibration's scratch; the pivots. Fresh vectors of this size are fresh pages:
+        # faulting them in cost a quarter of a solve at N = 10⁵.
         self._vectors = tuple(np.zeros(size) for _ in range(4))
+        self._scales = tuple(np.zeros(size) for _ in range(4))
+        self._pivots = np.zeros(size, dtype=np.intc)
 
     def assemble(self, path, p, h: float) -> bool:
         """The lifted matrix at ``path``; False on a non-finite entry."""
@@ -93,7 +95,8 @@ class LiftedSystem:
             self._scaling = self._equilibrate()
         else:
             _scale(self.work, self.bw, *self._scaling)
-        pivots = factor(self.model, self.work, self.bw, "band LU of the lifted system")
+        pivots = factor(self.model, self.work, self.bw, "band LU of the lifted system",
+                        self._pivots)
         self._factored = (key, self.work, pivots, diagonal)
 
     def _lu_solve(self, lu, pivots, b: np.ndarray, out: np.ndarray) -> np.ndarray:
@@ -110,10 +113,9 @@ class LiftedSystem:
         curvature ≈ 1/h³ beside composability's unit entries: unscaled, partial pivoting's
         backward error ε·max|column| erases those at N = 10⁶ (h⁻³ = 10¹⁸; cubic_spline
         STALLED there)."""
-        m, size = self.model, self.band.shape[1]
-        rows, cols = np.empty(size), np.empty(size)
+        m, (rows, cols, big, following) = self.model, self._scales
         m.lib.symvi_lifted_equilibrate(m.ptr(self.work.T), self.n_nodes, sweeps, m.ptr(rows),
-                                       m.ptr(cols))
+                                       m.ptr(cols), m.ptr(big), m.ptr(following))
         return rows, cols
 
     def minimum(self, shift: float = 0.0) -> tuple[bool, int]:
