@@ -3,8 +3,8 @@
 In one run, for two bundled problems at N = 10³, 10⁴, 10⁵, 10⁶ (T = 1, h = T/N), this
 script compiles the model (cached; the symbolic compile is excluded from every timing) and
 prints the time of one full Newton iteration (assemble R and its banded Jacobian in C,
-factorise with LAPACK, update the path in C, evaluate the new residual; best of 3), the
-number of iterations and total time of the solve (best of 3 when one solve is under 2 s),
+factorise and solve by band LU in C, update the path in C, evaluate the new residual; best
+of 3), the number of iterations and total time of the solve (best of 3 when one solve is under 2 s),
 its status and an error:
 
 * ``rigid_body_oc``, the rigid-body optimal control of paper §3.3.4 (R_0 = R_1 = I,
@@ -83,7 +83,7 @@ def boundary(name: str, N: int):
 
 def newton_iteration(module, start, end, N: int, sparse: bool = False):
     """One full Newton iteration on the problem at N, from the default initial path:
-    assemble R and J in C, factorise and solve (banded LAPACK, or the SuperLU baseline),
+    assemble R and J in C, factorise and solve (band LU in C, or the SuperLU baseline),
     update the path in C and evaluate the new residual. Returns a callable."""
     from symvi._runtime.assembly import Problem as _Problem
     from symvi._runtime.paths import initial_path

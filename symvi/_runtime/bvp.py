@@ -194,9 +194,9 @@ def _newton(problem, state, maxiter: int, xtol: float, ftol: float):
             state, taken, status, message = _iteration(problem, state, it, xtol, ftol, norms,
                                                        corrections)
         except LinAlgError as exc:
-            # a shifted or gauged Newton matrix that LAPACK could not factorise
+            # a shifted or gauged Newton matrix with a zero pivot in its band LU
             return state, norms, steps, Status.SINGULAR_JACOBIAN, (
-                f"singular Newton matrix at iteration {it} (LAPACK: {exc})")
+                f"singular Newton matrix at iteration {it} ({exc})")
         if taken is not None:
             steps.append(taken)
         if status is not None:
