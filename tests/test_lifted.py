@@ -100,6 +100,19 @@ def test_inertia_counts_the_newton_matrix_eigenvalues(compiled):
         assert (excess, minimum) == (below, below == 0), (shift, excess, below)
 
 
+def random_band(rng, size: int, bw: int, diagonal: float = 1.0):
+    """(A, its LAPACK band storage ab[2 bw + i − j, j]): a random matrix of bandwidth bw,
+    its diagonal scaled by ``diagonal``."""
+    A = np.zeros((size, size))
+    for d in range(-bw, bw + 1):
+        A += np.diag(rng.standard_normal(size - abs(d)) * (diagonal if d == 0 else 1.0), d)
+    ab = np.zeros((3 * bw + 1, size), order="F")
+    for j in range(size):
+        for i in range(max(0, j - bw), min(size, j + bw + 1)):
+            ab[2 * bw + i - j, j] = A[i, j]
+    return A, ab
+
+
 def test_band_factor_solve_and_residual_are_lapacks(compiled):
     """The C band LU (``band.factor``) against LAPACK's dgbtrf on a random band matrix
     whose small diagonal forces row exchanges: the same pivots and factors; the C solve
@@ -111,14 +124,7 @@ def test_band_factor_solve_and_residual_are_lapacks(compiled):
     band = runtime_of(mod, "band")
     rng = np.random.default_rng(3)
     size, bw = 200, 7
-    A = np.zeros((size, size))
-    for d in range(-bw, bw + 1):
-        A += np.diag(rng.standard_normal(size - abs(d)), d)
-    A[np.diag_indices(size)] *= 1e-3
-    ab = np.zeros((3 * bw + 1, size), order="F")
-    for j in range(size):
-        for i in range(max(0, j - bw), min(size, j + bw + 1)):
-            ab[2 * bw + i - j, j] = A[i, j]
+    A, ab = random_band(rng, size, bw, diagonal=1e-3)
     b, x, d = (rng.standard_normal(size) for _ in range(3))
     r, s = np.empty(size), np.empty(size)
     error = band.residual(mod.model, ab, bw, x, b, (r, s), d)
@@ -138,3 +144,20 @@ def test_band_factor_solve_and_residual_are_lapacks(compiled):
     singular[:, 50] = 0.0
     with pytest.raises(np.linalg.LinAlgError, match="test matrix: singular at column 51"):
         band.factor(mod.model, singular, bw, "test matrix")
+
+
+def test_band_cholesky_decides_definiteness_of_the_symmetric_part(compiled):
+    """The C band Cholesky (``band.positive_definite``) of sym(A) + s·I, A a random
+    non-symmetric band matrix: positive definite exactly for shifts s above −λ_min of
+    sym(A), and never with a non-finite entry."""
+    mod = compiled("cubic_spline")
+    band = runtime_of(mod, "band")
+    size, bw = 120, 5
+    A, ab = random_band(np.random.default_rng(5), size, bw)
+    lowest = float(np.linalg.eigvalsh(0.5 * (A + A.T))[0])
+    assert lowest < 0
+    for shift, expected in ((-lowest - 1e-6, False), (-lowest + 1e-6, True), (0.0, False),
+                            (-lowest + 10.0, True)):
+        assert band.positive_definite(mod.model, ab, bw, shift) is expected, shift
+    ab[2 * bw + 1, 7] = np.inf
+    assert band.positive_definite(mod.model, ab, bw, -lowest + 10.0) is False

@@ -10,10 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from .band import factor, lu_solve, reciprocal_condition
+from .band import factor, lu_solve, positive_definite, reciprocal_condition
 from .gauge import Gauge
 from .lifted import LIFT_FROM, LiftedSystem
-from .optimality import positive_definite
 from .paths import Path
 
 
@@ -40,6 +39,7 @@ class Problem:
         #: The residual's rounding level at the last iteration (bvp._rounding_level).
         self.level = None
         self._band = self._work = None   # reused: fresh pages are slow to touch at large N
+        self._lower = None               # the band Cholesky's scratch (:meth:`definite`)
         self.gauge = None
 
     def merit(self, path: Path) -> tuple[float, float]:
@@ -93,7 +93,9 @@ class Problem:
         the lifted system's inertia where it is used, else by band Cholesky of J."""
         if self._lifted is not None:
             return self._lifted.minimum(shift)[0]
-        return positive_definite(ab, bw, shift)
+        if self._lower is None or self._lower.size != (bw + 1) * ab.shape[1]:
+            self._lower = np.empty((bw + 1) * ab.shape[1])
+        return positive_definite(self.model, ab, bw, shift, self._lower)
 
     def _uses_lifted(self, n_nodes: int) -> bool:
         if not self.model.info.get("lifted"):

@@ -47,6 +47,18 @@ def factor(model, work: np.ndarray, bw: int, what: str,
     return pivots
 
 
+def positive_definite(model, ab: np.ndarray, bw: int, shift: float,
+                      lower: np.ndarray | None = None) -> bool:
+    """Whether sym(A) + shift·I is positive definite, A in full LAPACK storage: band
+    Cholesky of the symmetric part in C (``symvi_band_cholesky``; ``lower`` is its
+    scratch, (bw + 1)·size entries, allocated when not given)."""
+    size = ab.shape[1]
+    if lower is None or lower.size != (bw + 1) * size:
+        lower = np.empty((bw + 1) * size)
+    return int(model.lib.symvi_band_cholesky(model.ptr(ab.T), size, bw, float(shift),
+                                             model.ptr(lower))) < 0
+
+
 def lu_solve(model, lu: np.ndarray, bw: int, pivots: np.ndarray, b: np.ndarray) -> np.ndarray:
     """b ← A⁻¹ b in place (a C-contiguous float64 vector), from the LU of A that LAPACK's
     ``dgbtrf`` returned (``lu``, ``pivots``), in C (``symvi_band_solve``): the arithmetic of

@@ -68,14 +68,6 @@ def convexifying_shift(definite, start: float) -> float:
     return np.inf
 
 
-def positive_definite(ab: np.ndarray, bw: int, shift: float) -> bool:
-    """Whether W + shift·I is positive definite, W the symmetric part of the (all node)
-    Newton matrix in the band storage of ``assembly.Problem.assemble``: band Cholesky."""
-    W = _node_band(ab, bw)
-    W[0] += shift
-    return _first_bad_pivot(W) is None
-
-
 def _blocks(ab, bw, constraint_rows):
     """(W, AᵀA, ‖W‖/‖AᵀA‖) of the Newton matrix: without constraints W in lower band
     storage and AᵀA None, else both sparse (W symmetrised: symmetric at a KKT point, off
