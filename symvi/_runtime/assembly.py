@@ -2,8 +2,8 @@
 
 The residual at node j involves nodes j−r … j+r, so the Jacobian is block-banded: C
 assembles it in LAPACK's band storage (ab[2 bw + row − col, col] = J[row, col]) and
-its banded LU (:mod:`.band`) solves for the corrections, so one iteration costs O(N). The unknowns are corrections η_j of
-the free nodes, applied as the node variation g → g·τ(η), and with constraints the
+its banded LU (:mod:`.band`) solves for the corrections, so one iteration costs O(N).
+The unknowns are corrections η_j of the free nodes, applied as the node variation g → g·τ(η), and with constraints the
 multipliers λ^k of every window (paper §3.2, eq. ``constrainedso``), interleaved per node.
 """
 from __future__ import annotations
@@ -39,7 +39,6 @@ class Problem:
         #: The residual's rounding level at the last iteration (bvp._rounding_level).
         self.level = None
         self._band = self._work = None   # reused: fresh pages are slow to touch at large N
-        self._lower = None               # the band Cholesky's scratch (:meth:`definite`)
         self.gauge = None
 
     def merit(self, path: Path) -> tuple[float, float]:
@@ -93,9 +92,7 @@ class Problem:
         the lifted system's inertia where it is used, else by band Cholesky of J."""
         if self._lifted is not None:
             return self._lifted.minimum(shift)[0]
-        if self._lower is None or self._lower.size != (bw + 1) * ab.shape[1]:
-            self._lower = np.empty((bw + 1) * ab.shape[1])
-        return positive_definite(self.model, ab, bw, shift, self._lower)
+        return positive_definite(self.model, ab, bw, shift)
 
     def _uses_lifted(self, n_nodes: int) -> bool:
         if not self.model.info.get("lifted"):

@@ -70,16 +70,16 @@ class LiftedSystem:
         key = (shift, None if shifted is None or not shift else shifted.tobytes())
         if self._factored is None or self._factored[0] != key:
             self._factor(key, shift, shifted)
-        _, lu, pivots, diagonal = self._factored
+        _, pivots, diagonal = self._factored
         b, x, r, s = self._vectors
         b.fill(0.0)
         b[self.eta] = rhs
-        self._lu_solve(lu, pivots, b, x)
+        self._lu_solve(pivots, b, x)
         for _ in range(REFINEMENTS):
             error = residual(self.model, self.band, self.bw, x, b, (r, s), diagonal)
             if error <= 4 * np.finfo(float).eps:
                 break       # backward stable already (N ≤ 10⁵ after equilibration)
-            x += self._lu_solve(lu, pivots, r, r)
+            x += self._lu_solve(pivots, r, r)
         return x[self.eta]
 
     def _factor(self, key, shift: float, shifted: np.ndarray | None) -> None:
@@ -97,13 +97,14 @@ class LiftedSystem:
             _scale(self.work, self.bw, *self._scaling)
         pivots = factor(self.model, self.work, self.bw, "band LU of the lifted system",
                         self._pivots)
-        self._factored = (key, self.work, pivots, diagonal)
+        self._factored = (key, pivots, diagonal)
 
-    def _lu_solve(self, lu, pivots, b: np.ndarray, out: np.ndarray) -> np.ndarray:
-        """out = C (R A C)⁻¹ R b = A⁻¹ b from the equilibrated LU (``out`` may be ``b``)."""
+    def _lu_solve(self, pivots, b: np.ndarray, out: np.ndarray) -> np.ndarray:
+        """out = C (R A C)⁻¹ R b = A⁻¹ b from the equilibrated LU in the work band (``out``
+        may be ``b``)."""
         rows, cols = self._scaling
         np.multiply(rows, b, out=out)
-        lu_solve(self.model, lu, self.bw, pivots, out)
+        lu_solve(self.model, self.work, self.bw, pivots, out)
         out *= cols
         return out
 
