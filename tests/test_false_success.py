@@ -106,3 +106,23 @@ def test_no_false_success_on_the_group(compiled, name, N):
             assert np.abs(result.g - anchor.g).max() <= tol, (label, result.message)
             assert np.abs(result.f - anchor.f).max() * h <= tol, (label, result.message)
     assert len(successes) == 3, {k: r.message for k, r in results.items()}
+
+
+def test_rounding_floor_of_the_heavy_top_at_ten_thousand_steps(compiled):
+    """heavy_top_rotors_oc_variational at N = 10⁴: its residual sees the rotor angles'
+    rounding ε|θ| over h³, which moves the converged multipliers by about 5e-7 — more
+    than the default tolerance (1.9e-7). Before, two corrections below it in a row came
+    by luck after 28 iterations and said SUCCESS, 1e-6 off. Now the default tolerance
+    gives ILL_CONDITIONED with an attainable accuracy that covers the true spread, and
+    a tolerance above the floor (xtol = 1e-7) a SUCCESS in a few iterations."""
+    name, N = "heavy_top_rotors_oc_variational", 10_000
+    mod, ex = compiled(name), get(name).example
+    h = ex.h * ex.n_steps / N
+    loose = mod.solve_bvp(ex.start, ex.end, N, h, xtol=1e-7)
+    assert loose.success and loose.iterations <= 8, loose.message
+    strict = mod.solve_bvp(ex.start, ex.end, N, h, guess=loose)
+    assert strict.status == mod.Status.ILL_CONDITIONED, strict.message
+    attainable = float(re.search(r"attainable accuracy to about ([0-9.e+-]+)",
+                                 strict.message).group(1))
+    spread = np.abs(strict.multipliers - loose.multipliers).max()
+    assert spread <= 10 * attainable and attainable <= 1e-7 * (1 + 200), (spread, attainable)

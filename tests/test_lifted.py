@@ -16,7 +16,8 @@ from symvi.models import get
 from test_bvp_merit import dense_jacobian, runtime_of
 from test_false_success import REST_TO_REST, cubic
 
-LIFTED = ["cubic_spline", "so3_cubic", "rigid_body_oc", "double_pendulum_oc"]
+LIFTED = ["cubic_spline", "so3_cubic", "rigid_body_oc", "double_pendulum_oc", "cart_pole_oc",
+          "heavy_top_rotors_oc_variational"]
 
 
 def boundary(name: str, N: int) -> tuple:
@@ -47,6 +48,8 @@ def systems(mod, name: str, N: int, guess="chord"):
 @pytest.mark.parametrize("name", LIFTED)
 def test_lifted_steps_are_the_newton_steps(compiled, name):
     """Pair groupoid (increments measured from the nodes), SO(3) with its curvature terms,
+    constraints with their multipliers, an action groupoid (base points moving with the
+    nodes) times a pair groupoid with an exactly dependent constraint (its gauge rows),
     with and without the inertia correction's shift: the same correction as J η = −R."""
     mod = compiled(name)
     assert mod.INFO["lifted"]
@@ -98,6 +101,33 @@ def test_inertia_counts_the_newton_matrix_eigenvalues(compiled):
         minimum, excess = lifted.lifted_system.minimum(shift)
         below = int((eigenvalues < cut).sum())
         assert (excess, minimum) == (below, below == 0), (shift, excess, below)
+
+
+@pytest.mark.parametrize("name", ["cart_pole_oc", "heavy_top_rotors_oc_variational"])
+def test_constrained_inertia_decides_the_reduced_hessian(compiled, name):
+    """With constraints the lifted verdict for W + s·I is whether ZᵀWZ + s·I is positive
+    definite, Z an orthonormal basis of ker A (A the constraints' Jacobian on the free
+    nodes, rank deficient for the heavy top's exact dependency): at shifts between the
+    reduced Hessian's eigenvalues at the chord path, and below the smallest."""
+    N = 30
+    mod = compiled(name)
+    (node, _, ab, bw), (lifted, _, _, _) = systems(mod, name, N)
+    from scipy.linalg import null_space
+
+    J = dense_jacobian(ab, bw)
+    n, s = mod.model.n, mod.model.constraints
+    blocks = J.shape[0] // (n + s)
+    layout = np.arange(J.shape[0]).reshape(blocks, n + s)
+    free = layout[1:-1, :n].reshape(-1)      # η of nodes 2 … N − 2 (blocks 1 and N − 1 fixed)
+    rows = layout[:, n:].reshape(-1)
+    W, A = J[np.ix_(free, free)], J[np.ix_(rows, free)]
+    Z = null_space(A)
+    reduced = np.linalg.eigvalsh(Z.T @ (0.5 * (W + W.T)) @ Z)
+    scale = np.abs(reduced).max()
+    cuts = [*(0.5 * (reduced[:-1] + reduced[1:]))[:3], reduced[0] - 0.1 * scale]
+    for cut in cuts:
+        minimum, _ = lifted.lifted_system.minimum(-cut)
+        assert minimum == (cut < reduced[0]), (cut, reduced[:4])
 
 
 def random_band(rng, size: int, bw: int, diagonal: float = 1.0):
@@ -161,3 +191,4 @@ def test_band_cholesky_decides_definiteness_of_the_symmetric_part(compiled):
         assert band.positive_definite(mod.model, ab, bw, shift) is expected, shift
     ab[2 * bw + 1, 7] = np.inf
     assert band.positive_definite(mod.model, ab, bw, -lowest + 10.0) is False
+

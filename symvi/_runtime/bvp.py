@@ -59,10 +59,14 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
         tolerance there is ``ILL_CONDITIONED``, never SUCCESS, and the message gives
         the correction as the attainable accuracy. The Newton matrix of a second-order
         problem on its nodes has κ ∝ N⁴, which exhausts double precision near N = 10⁵;
-        unconstrained second-order models on pair and matrix-group factors solve for
-        the same corrections with the lifted system from N = 2000 on (κ ∝ N²,
-        :mod:`.lifted`): cubic_spline within 3e-12 of the exact cubic at N = 10⁵,
-        where the node formulation reached 4e-5. The default of 100
+        second-order models (with or without constraints, on pair, matrix-group and
+        action factors) solve for the same corrections with the lifted system from
+        N = 2000 on (κ ∝ N², :mod:`.lifted`): cubic_spline within 3e-12 of the exact
+        cubic at N = 10⁵, where the node formulation reached 4e-5. A SUCCESS also
+        needs the correction that undoes rounding the path's unknowns by one unit in
+        the last place to be within the tolerance
+        (:meth:`.assembly.Problem.rounding_correction`): two small corrections in a
+        row can be luck where that floor is larger. The default of 100
         iterations (SLSQP's) leaves room for constrained problems started far from
         feasibility: the non-planar heavy top from the chord guess takes 52–73.
         Optimal-control problems are globalised on their cost (with constraints: its
@@ -146,6 +150,13 @@ def _finite(result: BVPResult) -> BVPResult:
                 f"precision)"))
     return result
 
+
+#: A Newton correction at the residual's rounding level within this factor of the
+#: rounding floor (:meth:`.assembly.Problem.rounding_correction`), and not half the one
+#: before, is noise: iterating on cannot shrink it (the heavy top with rotors at
+#: N = 10⁵ and xtol = 1e-9: 60 iterations, 590 s, corrections between 1e-5 and 1e-3
+#: against a floor of 2e-4).
+NOISE = 10.0
 
 #: Below this many steps a Newton matrix singular to working precision is not the
 #: conditioning's growth with N (heavy_top_rotors_oc_variational at N = 4: 1/κ = 0).
@@ -243,6 +254,12 @@ def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list,
     if size <= tolerance:
         moved = problem.moved(state, delta, 1.0)    # round-off defeats a line search
         if moved is not None and corrections[-2] <= tolerance:
+            floor = problem.rounding_correction(ab, bw, moved)
+            if floor > tolerance:
+                return moved, size, *_rounding_limited(
+                    f"two Newton corrections ({corrections[-2]:.1e}, {size:.1e}) are within "
+                    f"the tolerance, but the one that undoes rounding the path's unknowns by "
+                    f"one unit in the last place is {floor:.1e}", floor, tolerance)
             return moved, size, Status.SUCCESS, (
                 f"; last Newton corrections {corrections[-2]:.1e}, {size:.1e}")
         if moved is not None:
@@ -252,6 +269,13 @@ def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list,
     else:
         taken = None
         if norms[-1] <= level:
+            floor = problem.rounding_correction(ab, bw, state)
+            if tolerance < floor and size <= NOISE * floor and size > corrections[-2] / 2:
+                return state, None, *_rounding_limited(
+                    f"the residual ({norms[-1]:.1e}) is at its rounding level ({level:.1e}) "
+                    f"and the Newton correction ({size:.1e}) is of the size of the one "
+                    f"that undoes rounding the path's unknowns by one unit in the last "
+                    f"place ({floor:.1e})", max(size, floor), tolerance)
             state, taken = natural_step(problem, state, delta, ab, bw, size)
         if taken is None and problem.minimise:
             state, taken = descent_step(problem, state, res, ab, bw, delta)
@@ -259,22 +283,23 @@ def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list,
             state, taken = line_search(problem, state, delta, res)
     if taken is None:
         if norms[-1] <= level:  # no descent left below the rounding level
-            return state, None, *_rounding_limited(norms[-1], level, size, tolerance)
+            return state, None, *_rounding_limited(
+                f"the residual ({norms[-1]:.1e}) is at its rounding level ({level:.1e}), "
+                f"where the Newton correction, the estimated error of the path, is "
+                f"{size:.1e}", size, tolerance)
         return state, None, Status.STALLED, f"line search stalled at iteration {it}"
     return state, taken, None, ""
 
 
-def _rounding_limited(norm: float, level: float, size: float, tolerance: float):
-    """Status and message when the residual is at its rounding level but the Newton
-    correction there — the estimate of the error left in the path — exceeds the
-    tolerance: never SUCCESS (issue 20). The correction is rounding noise amplified by
-    the conditioning of the Newton matrix, so its size is the attainable accuracy."""
+def _rounding_limited(finding: str, attainable: float, tolerance: float):
+    """Status and message when rounding, not Newton, bounds the error left (``finding``
+    says how it showed, ``attainable`` the estimate of that error) above the tolerance:
+    never SUCCESS (issue 20). The correction is rounding noise amplified by the
+    conditioning of the Newton matrix, so its size is the attainable accuracy."""
     return Status.ILL_CONDITIONED, (
-        f"the residual ({norm:.1e}) is at its rounding level ({level:.1e}), where the "
-        f"Newton correction, the estimated error of the path, is {size:.1e} > the "
-        f"tolerance xtol·(1 + size) = {tolerance:.1e}: rounding amplified by the Newton "
-        f"matrix's conditioning limits the attainable accuracy to about {size:.0e}; "
-        f"accept it with a larger xtol, or use fewer steps")
+        f"{finding} > the tolerance xtol·(1 + size) = {tolerance:.1e}: rounding amplified "
+        f"by the Newton matrix's conditioning limits the attainable accuracy to about "
+        f"{attainable:.0e}; accept it with a larger xtol, or use fewer steps")
 
 
 def _rounding_level(model, ab: np.ndarray, bw: int, u: np.ndarray) -> float:

@@ -47,13 +47,16 @@ class Gauge:
 
     def apply(self, band: np.ndarray, bw: int, rhs: np.ndarray,
               lam: np.ndarray | None = None) -> np.ndarray:
-        """Replace window w's rows of the Newton system, J in LAPACK band storage
-        (band[2 bw + row − col, col] = J[row, col]) in place; returns the new rhs. ``lam``:
-        the multipliers λ^w of the path the correction starts from, when that is not the
-        point of :meth:`update` (a simplified Newton correction at a trial point: with the
-        old λ^w it would repeat the gauge component of the step just taken)."""
-        rows, size = self.rows, band.shape[1]
-        cols = np.arange(max(0, rows[0] - bw), min(size, rows[-1] + bw + 1))
+        """Replace window w's rows of the Newton system (:meth:`replace_rows`) and of its
+        right-hand side (:meth:`replace_rhs`) in the node layout; returns the new rhs."""
+        self.replace_rows(band, bw, self.rows)
+        return self.replace_rhs(rhs, self.rows, lam)
+
+    def replace_rows(self, band: np.ndarray, bw: int, rows: np.ndarray) -> None:
+        """Window w's constraint ``rows`` (its multipliers' columns have the same indices)
+        of a matrix in LAPACK band storage (band[2 bw + row − col, col]) replaced in place
+        by (I − QQᵀ) rows + QQᵀ on the multipliers."""
+        cols = np.arange(max(0, rows[0] - bw), min(band.shape[1], rows[-1] + bw + 1))
         I, C = np.meshgrid(rows, cols, indexing="ij")
         inside = np.abs(I - C) <= bw
         diag = np.where(inside, 2 * bw + I - C, 0)
@@ -64,6 +67,13 @@ class Gauge:
             raise RuntimeError("the gauge rows do not fit the band: constraint rows of one "
                                "window have different supports")
         band[diag[inside], C[inside]] = new[inside]
+
+    def replace_rhs(self, rhs: np.ndarray, rows: np.ndarray,
+                    lam: np.ndarray | None = None) -> np.ndarray:
+        """The right-hand side with window w's ``rows`` replaced: (I − QQᵀ) rhs − QQᵀ λ^w.
+        ``lam``: the multipliers λ^w of the path the correction starts from, when that is
+        not the point of :meth:`update` (a simplified Newton correction at a trial point:
+        with the old λ^w it would repeat the gauge component of the step just taken)."""
         rhs = rhs.copy()
         lam = self.lam if lam is None else lam
         rhs[rows] = self.projector @ rhs[rows] - self.basis @ (self.basis.T @ lam)

@@ -4,11 +4,13 @@ The node formulation's Newton matrix J (:mod:`.assembly`) is a discrete fourth d
 its condition number grows like N⁴ and passes 1/ε near N = 10⁵, where its banded LU
 returns corrections without a correct digit. The same correction J η = −R solves a system
 with the node corrections η, the elements' increment changes u and their momentum
-changes μ as unknowns (the discrete-mechanics analogue of multiple shooting): its rows
-are the node residuals, the momenta's definitions and the elements' composability, each
-a first or second difference. Its condition number after equilibration grows like N²
-(measured exponents 2.0 on cubic_spline and 1.8–1.9 on rigid_body_oc, against 4.0 for
-J; tests/test_lifted.py). It is factorised after Ruiz equilibration and a solve is
+changes μ as unknowns (the discrete-mechanics analogue of multiple shooting), and with
+constraints the windows' multipliers λ: its rows are the node residuals, the momenta's
+definitions, the elements' composability and the windows' constraints, each a first or
+second difference. Pair, matrix-group and action factors alike (an action's base point
+moves with its node but is measured from no fibre). Its condition number after
+equilibration grows like N² (measured exponents 2.0 on cubic_spline and cart_pole_oc,
+1.8–1.9 on rigid_body_oc, against 4.0 for J; tests/test_lifted.py). It is factorised after Ruiz equilibration and a solve is
 refined (at most :data:`REFINEMENTS` times) while its componentwise backward error
 exceeds 4ε, so that at N = 10⁶ (κ ≈ 10¹³) the steps stay accurate: cubic_spline
 converges within 2e-11 of the exact cubic at N = 10⁶ and 3e-12 at 10⁵, where J's LU
@@ -19,13 +21,18 @@ from __future__ import annotations
 
 import numpy as np
 
-from .band import factor, lu_solve, residual
+from .band import factor, lu_solve, reciprocal_condition, residual
 
 #: Most steps of iterative refinement after a solve whose componentwise backward error
 #: exceeds 4ε: at N = 10⁶ (κ ≈ 10¹³ equilibrated) one LU solve can leave errors in the
 #: step's roughest components whose curvature ≈ h⁻³ turns them into residuals above the
 #: path's own (cubic_spline: the line search STALLED without equilibration and refinement).
 REFINEMENTS = 2
+
+#: The multipliers' regularisations −δ tried in the second-order test with constraints
+#: (:meth:`LiftedSystem.minimum`), in the symmetric scaling where entries are ≈ 1: the
+#: penalty 1/δ on AᵀA grows until W + AᵀA/δ is positive definite, rounding permitting.
+REGULARISATIONS = (1e-2, 1e-4, 1e-6, 1e-8)
 
 #: Number of steps from which the lifted system solves the Newton steps: below it J's
 #: conditioning (≈ N⁴ / 10) leaves at least six correct digits, and its LU is cheaper.
@@ -35,18 +42,20 @@ LIFT_FROM = 2000
 class LiftedSystem:
     """The lifted matrix at one path, its LU, and Newton corrections from it."""
 
-    def __init__(self, model, n_nodes: int):
+    def __init__(self, model, n_nodes: int, gauge=None):
         self.model, self.n_nodes = model, n_nodes
+        #: The gauge condition of exactly dependent constraints (:mod:`.gauge`), if any.
+        self.gauge = gauge
         self.bw = int(model.lib.symvi_lifted_bandwidth())
         size = int(model.lib.symvi_lifted_unknowns(n_nodes))
         # both written whole before they are read (the assembly zeroes the band)
         self.band = np.empty((3 * self.bw + 1, size), order="F")
         self.work = np.empty_like(self.band, order="F")
-        n = model.n
-        # η_t of the node layout's block t − 2 sits at (t − 1)·3n in the lifted layout
-        nodes = np.arange(2, n_nodes - 2)
-        self.eta = ((nodes[:, None] - 1) * 3 * n + np.arange(n)).reshape(-1)
-        self._factored = self._scaling = None
+        self.node, self.lifted = _layouts(model, n_nodes)
+        if gauge is not None:   # window w's multipliers and constraint rows
+            block = 3 * model.n + model.constraints
+            self.gauge_rows = gauge.window * block + np.arange(model.constraints)
+        self._factored = self._scaling = self._at = self._inertia_scale = None
         # Kept: right-hand side, solution, residual and its scale; R, C and the
         # equilibration's scratch; the pivots. Fresh vectors of this size are fresh pages:
         # faulting them in cost a quarter of a solve at N = 10⁵.
@@ -54,33 +63,45 @@ class LiftedSystem:
         self._scales = tuple(np.zeros(size) for _ in range(4))
         self._pivots = np.zeros(size, dtype=np.intc)
 
-    def assemble(self, path, p, h: float) -> bool:
-        """The lifted matrix at ``path``; False on a non-finite entry."""
+    def assemble(self, path, p, h: float, gauged: bool = True) -> bool:
+        """The lifted matrix at ``path``, with the gauge rows (:meth:`.gauge.Gauge.
+        replace_rows`, the gauge updated at ``path``) unless not ``gauged``; False on a
+        non-finite entry."""
         m = self.model
         self._factored = self._scaling = None
-        code = m.lib.symvi_lifted_assemble(m.ptr(path.x), m.ptr(path.f), self.n_nodes,
-                                           m.ptr(p), h, m.ptr(self.band.T))
+        code = m.lib.symvi_lifted_assemble(m.ptr(path.x), m.ptr(path.f), m.ptr(path.lam),
+                                           self.n_nodes, m.ptr(p), h, m.ptr(self.band.T))
+        self._at = (path, p, h, gauged and self.gauge is not None)
+        if self._at[3]:
+            self.gauge.replace_rows(self.band, self.bw, self.gauge_rows)
         return code == 0
 
     def solve(self, rhs: np.ndarray, shift: float = 0.0,
-              shifted: np.ndarray | None = None) -> np.ndarray:
-        """η with (J + shift·D) η = rhs, D the identity on the node unknowns ``shifted``
-        (a mask in the node layout; default all). The LU is kept for further solves with
-        the same shift until the next assembly (a simplified Newton step reuses it)."""
+              shifted: np.ndarray | None = None, lam: np.ndarray | None = None) -> np.ndarray:
+        """The correction (η, λ) in the node layout of :mod:`.assembly` with
+        (J + shift·D) (η, λ) = rhs, D the identity on the unknowns ``shifted`` (a mask in
+        the node layout; default all), the gauge rows posed with the
+        multipliers ``lam`` (:meth:`.gauge.Gauge.replace_rhs`). The LU is kept for further
+        solves with the same shift until the next assembly (a simplified Newton step
+        reuses it)."""
         key = (shift, None if shifted is None or not shift else shifted.tobytes())
         if self._factored is None or self._factored[0] != key:
             self._factor(key, shift, shifted)
         _, pivots, diagonal = self._factored
         b, x, r, s = self._vectors
         b.fill(0.0)
-        b[self.eta] = rhs
+        b[self.lifted] = rhs[self.node]
+        if self.gauge is not None:
+            b[:] = self.gauge.replace_rhs(b, self.gauge_rows, lam)
         self._lu_solve(pivots, b, x)
         for _ in range(REFINEMENTS):
             error = residual(self.model, self.band, self.bw, x, b, (r, s), diagonal)
             if error <= 4 * np.finfo(float).eps:
                 break       # backward stable already (N ≤ 10⁵ after equilibration)
             x += self._lu_solve(pivots, r, r)
-        return x[self.eta]
+        out = np.zeros(len(rhs))
+        out[self.node] = x[self.lifted]
+        return out
 
     def _factor(self, key, shift: float, shifted: np.ndarray | None) -> None:
         """LU of the equilibrated (and shifted) lifted matrix in the work band."""
@@ -89,7 +110,7 @@ class LiftedSystem:
         diagonal = None
         if shift:
             diagonal = np.zeros(self.band.shape[1])
-            diagonal[self.eta] = shift if shifted is None else shift * shifted
+            diagonal[self.lifted] = shift if shifted is None else shift * shifted[self.node]
             self.work[2 * self.bw] += diagonal
         if self._scaling is None:
             self._scaling = self._equilibrate()
@@ -98,6 +119,16 @@ class LiftedSystem:
         pivots = factor(self.model, self.work, self.bw, "band LU of the lifted system",
                         self._pivots)
         self._factored = (key, pivots, diagonal)
+
+    def reciprocal_condition(self) -> float:
+        """An estimate of 1/κ₁ of the equilibrated lifted matrix, the one factorised (the
+        raw matrix's is meaningless: its u columns carry curvatures ≈ h⁻³ beside unit
+        entries; the heavy top with rotors at N = 10⁴: 6e-20 raw)."""
+        np.copyto(self.work, self.band)
+        self._factored, self._scaling = None, self._equilibrate()
+        rcond = reciprocal_condition(self.work, self.bw)
+        self._scaling = None        # the work band now holds an LU
+        return rcond
 
     def _lu_solve(self, pivots, b: np.ndarray, out: np.ndarray) -> np.ndarray:
         """out = C (R A C)⁻¹ R b = A⁻¹ b from the equilibrated LU in the work band (``out``
@@ -120,29 +151,72 @@ class LiftedSystem:
         return rows, cols
 
     def minimum(self, shift: float = 0.0) -> tuple[bool, int]:
-        """Whether J + shift·I is positive definite, from the inertia of the lifted
-        matrix: (verdict, negative eigenvalues beyond the momenta's, −1 when a pivot
+        """Whether J + shift·I (on the node corrections) is positive definite on the
+        constraints' tangent space, from the inertia of the lifted matrix: (verdict,
+        negative eigenvalues beyond the momenta's and multipliers', −1 when a pivot
         vanished and the count is incomplete).
 
         With the momenta's sign flipped the lifted matrix is the KKT matrix
-        [[W, Aᵀ], [A, 0]] of the quadratic model in (η, u) under composability (A of full
-        row rank), whose inertia is that of J = ZᵀWZ plus one positive and one negative
-        eigenvalue per constraint (Gould 1985): J is positive definite iff there is
-        exactly one negative eigenvalue per momentum. LAPACK has no band LDLᵀ, so the C
+        [[W, Aᵀ], [A, 0]] of the quadratic model in (η, u) under composability (A of
+        full row rank), whose inertia is that of the reduced Hessian plus one positive
+        and one negative eigenvalue per constraint (Gould 1985): without constraints J
+        is positive definite iff there is exactly one negative eigenvalue per momentum.
+        The constraints Φ_d may be dependent (exactly, by a declared symmetry; nearly,
+        as the vertical momentum's multiplier of a planar heavy-top motion, whose
+        eigenvalue falls like N⁻⁵ below rounding), so their multipliers' block gets
+        −δ·I (:data:`REGULARISATIONS`, in the symmetric scaling of the C, entries ≈ 1):
+        then the count is one per momentum and multiplier exactly when W + AᵀA/δ is
+        positive definite on (η, u), which proves dᵀWd > 0 on ker A (Debreu's lemma, as
+        :func:`.optimality.second_order`). LAPACK has no band LDLᵀ, so the C
         (``symvi_lifted_inertia``) eliminates it block by block with Bunch–Parlett
-        pivoting inside each block, in blocks (μ_{t−1}, η_t, u_t) where no block is a
-        near-singular saddle. J itself cannot answer at large N: its smallest eigenvalue
-        (≈ h π⁴) is below the rounding of its largest entries (≈ ε 16/h³) from
-        N ≈ 10⁴·⁵ on (rigid_body_oc at N = 10⁵: a false SADDLE by band Cholesky of J).
+        pivoting inside each block, in blocks (μ_{t−1}, λ_{t−1}, η_t, u_t) where no
+        block is a near-singular saddle. J itself cannot answer at large N: its smallest
+        eigenvalue (≈ h π⁴) is below the rounding of its largest entries (≈ ε 16/h³)
+        from N ≈ 10⁴·⁵ on (rigid_body_oc at N = 10⁵: a false SADDLE by band Cholesky of
+        J).
         """
-        m = self.model
-        negative, zero = m.ffi.new("long *"), m.ffi.new("long *")
-        m.lib.symvi_lifted_inertia(m.ptr(self.band.T), self.n_nodes, shift, negative, zero)
-        if zero[0]:
-            return False, -1
-        excess = int(negative[0]) - self.band.shape[1] // 3
-        return excess == 0, excess
+        if self._at is not None and self._at[3]:    # the KKT matrix, without gauge rows
+            path, p, h, _ = self._at
+            self.assemble(path, p, h, gauged=False)
+            try:
+                return self._count(shift)
+            finally:
+                self.assemble(path, p, h)
+        return self._count(shift)
 
+    def _count(self, shift: float) -> tuple[bool, int]:
+        """:meth:`minimum` on the band as it is (symmetric up to the momenta's sign)."""
+        m, s = self.model, self.model.constraints
+        if self._inertia_scale is None:
+            self._inertia_scale = np.zeros(self.band.shape[1] + 3 * m.n)
+        blocks = self.n_nodes - 3
+        expected = blocks * m.n + (blocks + 1) * s
+        negative, zero = m.ffi.new("long *"), m.ffi.new("long *")
+        for delta in REGULARISATIONS if s else (0.0,):
+            m.lib.symvi_lifted_inertia(m.ptr(self.band.T), self.n_nodes, shift, delta,
+                                       m.ptr(self._inertia_scale), negative, zero)
+            excess = -1 if zero[0] else int(negative[0]) - expected
+            if excess == 0:
+                return True, 0
+        return False, excess
+
+
+def _layouts(model, n_nodes: int) -> tuple[np.ndarray, np.ndarray]:
+    """(indices in the node layout, their indices in the lifted layout) of the unknowns
+    the two layouts share. The node layout
+    (:meth:`.assembly.Problem._blocks`) has blocks (η_t, λ_{t−1}) of the nodes t from
+    T0 = 1 with constraints (else 2) to n_nodes − 1 − T0; the lifted one holds η_t at
+    s + (t − 1)(3n + s) for t = 1 … n_nodes − 3 and λ_w at w (3n + s). The node layout's
+    η_{n_nodes−2} with constraints is a fixed node's, pinned to 0: not shared."""
+    n, s = model.n, model.constraints
+    t0, lb = (1 if s else 2), 3 * n + s
+    t = np.arange(t0, n_nodes - t0)
+    node = (t - t0)[:, None] * (n + s) + np.arange(n + s)
+    lifted = np.concatenate([s + (t - 1)[:, None] * lb + np.arange(n),
+                             (t - 1)[:, None] * lb + np.arange(s)], axis=1)
+    is_eta = np.arange(n + s) < n
+    shared = (t <= n_nodes - 3)[:, None] | ~is_eta
+    return node[shared], lifted[shared]
 
 
 def _scale(band: np.ndarray, bw: int, rows: np.ndarray, cols: np.ndarray) -> None:

@@ -87,8 +87,9 @@ def check_path_memory(model, n_steps: int) -> None:
     band = 3 * ((model.order + 1) * B - 1) + 1
     path = model.m + model.info["configuration_dim"] + model.n + model.constraints
     per_node = 2 * band * B + 8 * path
-    if model.info.get("lifted"):      # the lifted system (lifted.py): 3n unknowns per node
-        per_node += 2 * (3 * (5 * model.n - 1) + 1) * 3 * model.n
+    if model.info.get("lifted"):      # the lifted system (lifted.py): 3n + s per node
+        lifted = 3 * model.n + model.constraints
+        per_node += 2 * (3 * (lifted + 2 * model.n - 1) + 1) * lifted
     needed = 8.0 * (n_steps + 1) * per_node
     require(needed, f"the whole-trajectory solve with N = {n_steps:,}",
             "use fewer steps")

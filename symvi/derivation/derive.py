@@ -287,21 +287,21 @@ def fibre_sources(dm: DiscreteModel) -> tuple[int, ...]:
     The lifted Newton system takes the increments u_k of the elements as unknowns beside
     the nodes: a group factor's fibre hξ is one (−1), a pair factor's fibre q_{k+1} is
     measured from its base coordinate q_k (its index; u = q_{k+1} − q_k). It exists for
-    unconstrained second-order whole-trajectory models whose targets are plain fibre
-    coordinates (pair and matrix-group factors; not action groupoids): () otherwise.
+    second-order whole-trajectory models, with or without constraints, whose fibres are
+    each a group increment or the target of a base coordinate (pair, matrix-group and
+    action factors: an action's base point Γ_{k+1} = Γ_k·τ(hξ_k) is the source of no
+    fibre, so the change of coordinates to increments stays linear); () otherwise.
     """
     g = dm.groupoid
-    if dm.order != 2 or dm.constraints or not g.whole_trajectory:
+    if dm.order != 2 or not g.whole_trajectory:
         return ()
     one = _stencil(dm, 1)
     fibre = {s: i for i, s in enumerate(one.fs[0])}
-    target = list(g.target(one.xs[0], one.fs[0], dm.step))
-    if not all(t in fibre for t in target):
-        return ()
-    sources = [-1] * g.fibre_dim
-    for j, t in enumerate(target):
-        sources[fibre[t]] = j
-    return tuple(sources)
+    sources = [-1 if scaled else None for scaled in g.step_scaled()]
+    for j, t in enumerate(g.target(one.xs[0], one.fs[0], dm.step)):
+        if t in fibre:
+            sources[fibre[t]] = j
+    return () if None in sources else tuple(sources)
 
 
 def _in_increments(kernel: Kernel, st: _Stencil, sources: Sequence[int]) -> Kernel:
@@ -316,7 +316,8 @@ def _in_increments(kernel: Kernel, st: _Stencil, sources: Sequence[int]) -> Kern
     approximate. Every output (a Jacobian still with respect to z) is rewritten with each
     such coordinate as its predecessor plus the difference, which SymPy's automatic
     simplification cancels in the linear combinations; the differences are the kernel's
-    first definitions. Unchanged without ``sources`` (:func:`fibre_sources`).
+    first definitions. Unchanged without ``sources`` (:func:`fibre_sources`) and for
+    kernels with named base points (an action's).
     """
     if not sources or kernel.definitions:
         return kernel
@@ -337,18 +338,28 @@ def _in_increments(kernel: Kernel, st: _Stencil, sources: Sequence[int]) -> Kern
 
 def _lifted_kernels(dm: DiscreteModel, engine: "_Engine", window: _Stencil,
                     one: _Stencil) -> list[Kernel]:
-    """The window Hessian of L_d and the derivatives of the node variations contracted with
-    a covector: with them the lifted system is assembled (``templates/lifted.c.j2``)."""
+    """The window Hessian of ℓ = L_d + λ·Φ_d (the window's multipliers last) and the
+    derivatives of the node variations contracted with a covector: with them the lifted
+    system is assembled (``templates/lifted.c.j2``). The window's named base points
+    (an action's x_{w+1} = β(x_w, f_w)) are substituted, so that the Hessian carries
+    their chain rule."""
     g = dm.groupoid
-    gradient, hessian = gradient_and_hessian(engine.lagrangian(window, 0), window.z)
+    lams = tuple(sp.Dummy(f"mult_{a}", real=True) for a in range(len(dm.multipliers)))
+    augmented = engine.lagrangian(window, 0) + sum(
+        (l * c for l, c in zip(lams, engine.window_values(window, 0, dm.constraints))),
+        sp.S.Zero)
+    for symbol, value in reversed(window.definitions):
+        augmented = augmented.xreplace({symbol: value})
+    z = window.z + lams
+    gradient, hessian = gradient_and_hessian(augmented, z)
     c = tuple(sp.Dummy(f"c_{i}", real=True) for i in range(len(one.z)))
     cv = sp.Matrix(c)
-    z = one.z
-    duals = tuple((name, jacobian(side(one.xs[0], one.fs[0], dm.step).T * cv, z))
+    duals = tuple((name, jacobian(side(one.xs[0], one.fs[0], dm.step).T * cv, one.z))
                   for name, side in (("left", g.left), ("right", g.right)))
-    return [Kernel("window_hessian", window.z, (("gradient", gradient), ("hessian", hessian)),
-                   "gradient and Hessian of L_d on one window (x_w, f_w, f_{w+1})", along=False),
-            Kernel("variations_dual", z + c, duals,
+    return [Kernel("window_hessian", z, (("gradient", gradient), ("hessian", hessian)),
+                   "gradient and Hessian of L_d + lambda.Phi_d on one window (x_w, f_w, "
+                   "f_{w+1}, lambda_w)", along=False),
+            Kernel("variations_dual", one.z + c, duals,
                    "d/d(x, f) of left(x, f)^T c and right(x, f)^T c: the curvature of the node "
                    "variations along a covector c", along=False)]
 
