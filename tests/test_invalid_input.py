@@ -200,7 +200,10 @@ def test_failed_thinned_run_stops_at_the_failing_step(compiled):
 
 
 INTERRUPTED = textwrap.dedent("""
-    import sys, time
+    import signal, sys, time
+    # Python keeps SIGINT ignored when it starts with it ignored (a background job of a
+    # non-interactive shell): install the handler an interactive session has
+    signal.signal(signal.SIGINT, signal.default_int_handler)
     sys.path.insert(0, sys.argv[1])
     import pendulum
     pendulum.integrate([[1.0], [1.01]], 10, 0.01)       # warm up
