@@ -187,14 +187,15 @@ class LiftedSystem:
     def _count(self, shift: float) -> tuple[bool, int]:
         """:meth:`minimum` on the band as it is (symmetric up to the momenta's sign)."""
         m, s = self.model, self.model.constraints
-        if self._inertia_scale is None:
-            self._inertia_scale = np.zeros(self.band.shape[1] + 3 * m.n)
+        if self._inertia_scale is None:       # D and its sweeps' scratch
+            self._inertia_scale = np.zeros((2, self.band.shape[1] + 3 * m.n))
         blocks = self.n_nodes - 3
         expected = blocks * m.n + (blocks + 1) * s
         negative, zero = m.ffi.new("long *"), m.ffi.new("long *")
         for delta in REGULARISATIONS if s else (0.0,):
             m.lib.symvi_lifted_inertia(m.ptr(self.band.T), self.n_nodes, shift, delta,
-                                       m.ptr(self._inertia_scale), negative, zero)
+                                       m.ptr(self._inertia_scale[0]),
+                                       m.ptr(self._inertia_scale[1]), negative, zero)
             excess = -1 if zero[0] else int(negative[0]) - expected
             if excess == 0:
                 return True, 0
