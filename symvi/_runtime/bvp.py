@@ -269,8 +269,10 @@ def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list,
     else:
         taken = None
         if norms[-1] <= level:
-            floor = problem.rounding_correction(ab, bw, state)
-            if tolerance < floor and size <= NOISE * floor and size > corrections[-2] / 2:
+            # the floor costs two residuals and a solve: only once Newton stops contracting
+            floor = problem.rounding_correction(ab, bw, state) \
+                if size > corrections[-2] / 2 else 0.0
+            if tolerance < floor and size <= NOISE * floor:
                 return state, None, *_rounding_limited(
                     f"the residual ({norms[-1]:.1e}) is at its rounding level ({level:.1e}) "
                     f"and the Newton correction ({size:.1e}) is of the size of the one "

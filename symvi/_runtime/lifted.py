@@ -180,8 +180,9 @@ class LiftedSystem:
             self.assemble(path, p, h, gauged=False)
             try:
                 return self._count(shift)
-            finally:
-                self.assemble(path, p, h)
+            finally:        # the gauge rows back, for the solves
+                self.gauge.replace_rows(self.band, self.bw, self.gauge_rows)
+                self._at = (path, p, h, True)
         return self._count(shift)
 
     def _count(self, shift: float) -> tuple[bool, int]:
