@@ -39,6 +39,10 @@ class Problem:
         #: The residual's rounding level at the last iteration (bvp._rounding_level).
         self.level = None
         self._band = self._work = None   # reused: fresh pages are slow to touch at large N
+        #: (shift key, pivots) of the LU in the work band, kept until the next assembly:
+        #: the rounding floor and simplified corrections reuse it.
+        self._factored = None
+        self._last = None       # (path, assembly) of the last assembly with a Jacobian
         self.gauge = None
 
     def merit(self, path: Path) -> tuple[float, float]:
@@ -56,6 +60,7 @@ class Problem:
                 self._band = np.zeros((3 * bw + 1, unknown), order="F")
                 self._work = np.zeros_like(self._band, order="F")
             ab = self._band
+            self._factored = None
         code = m.lib.symvi_bvp_assemble(m.ptr(path.x), m.ptr(path.f), m.ptr(path.lam), n_nodes,
                                         m.ptr(self.p), self.h, m.ptr(res),
                                         m.ptr(ab.T) if with_jacobian else m.ffi.NULL)
@@ -67,7 +72,16 @@ class Problem:
             if self._lifted is None or self._lifted.n_nodes != n_nodes:
                 self._lifted = LiftedSystem(m, n_nodes, self.gauge)
             code = code if self._lifted.assemble(path, self.p, self.h) else 1
+        if with_jacobian:
+            self._last = (path, (res, ab, bw, code == 0))
         return res, ab, bw, code == 0
+
+    def assembled(self, path: Path):
+        """:meth:`assemble` with the Jacobian at ``path``, reusing the last one if it was
+        at this very path."""
+        if self._last is not None and self._last[0] is path:
+            return self._last[1]
+        return self.assemble(path, True)
 
     def solve(self, ab, bw: int, rhs: np.ndarray, shift: float = 0.0,
               shifted: np.ndarray | None = None, at: Path | None = None) -> np.ndarray:
@@ -76,12 +90,18 @@ class Problem:
         identity on the unknowns ``shifted`` (a mask; default all). Exactly dependent
         constraints are replaced by their gauge condition (:mod:`.gauge`), posed at the
         path ``at`` (default: where J was assembled)."""
+        lam = None if at is None or self.gauge is None else at.lam[self.gauge.window]
         if self._lifted is not None:
-            lam = None if at is None or self.gauge is None else at.lam[self.gauge.window]
             return self._lifted.solve(rhs, shift, shifted, lam)
-        rhs = self._newton_matrix(ab, bw, rhs, shift, shifted, at)
-        pivots = factor(self.model, self._work, bw, "band LU of the Newton matrix")
-        return lu_solve(self.model, self._work, bw, pivots, np.array(rhs, dtype=float))
+        key = (shift, None if shifted is None or not shift else shifted.tobytes())
+        if self._factored is None or self._factored[0] != key:
+            self._newton_matrix(ab, bw, shift, shifted)
+            self._factored = (key, factor(self.model, self._work, bw,
+                                          "band LU of the Newton matrix"))
+        if self.gauge is not None:
+            rhs = self.gauge.replace_rhs(rhs, self.gauge.rows, lam)
+        return lu_solve(self.model, self._work, bw, self._factored[1],
+                        np.array(rhs, dtype=float))
 
     @property
     def lifted_system(self) -> LiftedSystem | None:
@@ -106,20 +126,19 @@ class Problem:
         rounding may dominate its solves."""
         if self._lifted is not None:
             return self._lifted.reciprocal_condition()
-        self._newton_matrix(ab, bw, np.zeros(self._work.shape[1]))
+        self._factored = None       # the estimate overwrites the work band
+        self._newton_matrix(ab, bw)
         return reciprocal_condition(self._work, bw)
 
-    def _newton_matrix(self, ab, bw: int, rhs: np.ndarray, shift: float = 0.0,
-                       shifted: np.ndarray | None = None, at: Path | None = None) -> np.ndarray:
+    def _newton_matrix(self, ab, bw: int, shift: float = 0.0,
+                       shifted: np.ndarray | None = None) -> None:
         """Fill the work band with the matrix :meth:`solve` factorises (J, its shift, the
-        gauge rows); returns the matching right-hand side."""
+        gauge rows)."""
         np.copyto(self._work, ab)
         if shift:
             self._work[2 * bw] += shift if shifted is None else shift * shifted
-        if self.gauge is None:
-            return rhs
-        lam = None if at is None else at.lam[self.gauge.window]
-        return self.gauge.apply(self._work, bw, rhs, lam)
+        if self.gauge is not None:
+            self.gauge.replace_rows(self._work, bw, self.gauge.rows)
 
     def moved(self, path: Path, delta, alpha):
         m, trial = self.model, path.copy()
@@ -129,7 +148,8 @@ class Problem:
                                       m.ptr(self.p), self.h, failed)
         return trial if code == 0 else None
 
-    def rounding_correction(self, ab, bw: int, path: Path) -> float:
+    def rounding_correction(self, ab, bw: int, path: Path,
+                            residual: np.ndarray | None = None) -> float:
         """‖Δ‖∞ of the Newton correction (with J as assembled, in ``ab``) that undoes
         moving every unknown of ``path`` — node, multiplier — by one unit in the last
         place of its magnitude (:meth:`magnitudes`), in random directions, the path's
@@ -138,12 +158,14 @@ class Problem:
         converged path's last corrections can be small by luck where this floor is
         large: the heavy top with rotors at N = 10⁴, whose residual sees the rotor
         angles' rounding ε|θ| over h³, passed two corrections below 1.9e-7 in a row
-        after 28 of up to 7e-5, and its multipliers were 1e-6 off."""
+        after 28 of up to 7e-5, and its multipliers were 1e-6 off. ``residual``: R at
+        ``path`` when known (the Jacobian's)."""
         signs = np.random.default_rng(0).choice((-1.0, 1.0), ab.shape[1])
         rounded = self.moved(path, np.finfo(float).eps * signs * self.magnitudes(path), 1.0)
         if rounded is None:
             return np.inf
-        residuals = [self.assemble(p, False) for p in (path, rounded)]
+        residuals = [(residual, None, None, True) if residual is not None and p is path
+                     else self.assemble(p, False) for p in (path, rounded)]
         if not all(finite for *_, finite in residuals):
             return np.inf
         if self.gauge is None:

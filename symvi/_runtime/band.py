@@ -49,12 +49,19 @@ def factor(model, work: np.ndarray, bw: int, what: str,
 
 
 def positive_definite(model, ab: np.ndarray, bw: int, shift: float) -> bool:
-    """Whether sym(A) + shift·I is positive definite, A in full LAPACK storage: band
-    Cholesky of the symmetric part in C (``symvi_band_cholesky``)."""
+    """Whether sym(A) + shift·I is positive definite, A in full LAPACK storage."""
+    return cholesky_pivot(model, ab, bw, shift) is None
+
+
+def cholesky_pivot(model, ab: np.ndarray, bw: int, shift: float = 0.0) -> float | None:
+    """None when sym(A) + shift·I is positive definite, else the first pivot of its band
+    Cholesky factorisation that is not positive (A in full LAPACK storage; the symmetric
+    part assembled and factorised in C, ``symvi_band_cholesky``)."""
     size = ab.shape[1]
     lower = np.empty((bw + 1) * size)
-    return int(model.lib.symvi_band_cholesky(model.ptr(ab.T), size, bw, float(shift),
-                                             model.ptr(lower))) < 0
+    column = int(model.lib.symvi_band_cholesky(model.ptr(ab.T), size, bw, float(shift),
+                                               model.ptr(lower)))
+    return None if column < 0 else float(lower[column * (bw + 1)])
 
 
 def lu_solve(model, lu: np.ndarray, bw: int, pivots: np.ndarray, b: np.ndarray) -> np.ndarray:

@@ -17,7 +17,7 @@ import numpy as np
 
 from . import arguments
 from .assembly import Problem
-from .band import product
+from .band import cholesky_pivot, product
 from .gauge import check_boundary
 from .globalisation import descent_step, line_search, natural_step
 from .optimality import second_order
@@ -115,7 +115,7 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
 def _minimum(problem: Problem, path: Path, message: str) -> tuple[Status, str]:
     """An optimal-control solve is a SUCCESS only at a minimum: the second-order test
     (:func:`.optimality.second_order`) on the converged path, else SADDLE."""
-    _, ab, bw, finite = problem.assemble(path, True)
+    _, ab, bw, finite = problem.assembled(path)
     if finite and problem.lifted_system is not None:
         minimum, excess = problem.lifted_system.minimum()
         if minimum:
@@ -124,7 +124,8 @@ def _minimum(problem: Problem, path: Path, message: str) -> tuple[Status, str]:
                  if excess > 0 else " (a vanishing pivot in the lifted system's inertia: "
                  "the Hessian is singular to working precision)")
     else:
-        verdict = second_order(ab, bw, problem.constraint_rows(path)) if finite else None
+        verdict = second_order(ab, bw, problem.constraint_rows(path),
+                               lambda: cholesky_pivot(problem.model, ab, bw)) if finite else None
         if verdict is not None and verdict.minimum:
             return Status.SUCCESS, message
         pivot = "" if verdict is None else (
@@ -212,16 +213,17 @@ def _newton(problem, state, maxiter: int, xtol: float, ftol: float):
             steps.append(taken)
         if status is not None:
             if status is Status.SUCCESS and taken is not None:
-                # the residual of the path returned, after the last update
-                norms.append(_residual_norm(problem, state))
+                # the residual of the path returned, after the last update (with the
+                # Jacobian that the second-order test of a minimum needs next)
+                norms.append(_residual_norm(problem, state, problem.minimise))
             return state, norms, steps, status, message
     norms.append(_residual_norm(problem, state))
     return (state, norms, steps, Status.MAX_ITERATIONS,
             f"Newton's method did not converge in {maxiter} iterations")
 
 
-def _residual_norm(problem, state) -> float:
-    return float(np.abs(problem.assemble(state, False)[0]).max(initial=0.0))
+def _residual_norm(problem, state, with_jacobian: bool = False) -> float:
+    return float(np.abs(problem.assemble(state, with_jacobian)[0]).max(initial=0.0))
 
 
 def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list,
@@ -243,46 +245,31 @@ def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list,
     if norms[-1] <= ftol:
         return state, None, Status.SUCCESS, ""
     # SUCCESS only on full Newton corrections, the estimate of the error left (a damped
-    # step may be short far from the solution), and on two in a row: at the rounding
-    # level one correction can be small by cancellation, the error e and the rounding
-    # noise J⁻¹n in it nearly opposite, while the next path's error is J⁻¹n.
+    # step may be short far from the solution), with the rounding floor beside them
     size = float(np.abs(delta).max(initial=0.0))
     tolerance = xtol * (1.0 + problem.size(state))
     corrections.append(size)
     level = _rounding_level(problem.model, ab, bw, problem.magnitudes(state))
     problem.level = level
     if size <= tolerance:
-        moved = problem.moved(state, delta, 1.0)    # round-off defeats a line search
-        if moved is not None and corrections[-2] <= tolerance:
-            floor = problem.rounding_correction(ab, bw, moved)
-            if floor > tolerance:
-                return moved, size, *_rounding_limited(
-                    f"two Newton corrections ({corrections[-2]:.1e}, {size:.1e}) are within "
-                    f"the tolerance, but the one that undoes rounding the path's unknowns by "
-                    f"one unit in the last place is {floor:.1e}", floor, tolerance)
-            return moved, size, Status.SUCCESS, (
-                f"; last Newton corrections {corrections[-2]:.1e}, {size:.1e}")
-        if moved is not None:
-            return moved, size, None, ""
-        return state, None, Status.STALLED, (
-            f"the full Newton step leaves the retraction's chart at iteration {it}")
-    else:
-        taken = None
-        if norms[-1] <= level:
-            # the floor costs two residuals and a solve: only once Newton stops contracting
-            floor = problem.rounding_correction(ab, bw, state) \
-                if size > corrections[-2] / 2 else 0.0
-            if tolerance < floor and size <= NOISE * floor:
-                return state, None, *_rounding_limited(
-                    f"the residual ({norms[-1]:.1e}) is at its rounding level ({level:.1e}) "
-                    f"and the Newton correction ({size:.1e}) is of the size of the one "
-                    f"that undoes rounding the path's unknowns by one unit in the last "
-                    f"place ({floor:.1e})", max(size, floor), tolerance)
-            state, taken = natural_step(problem, state, delta, ab, bw, size)
-        if taken is None and problem.minimise:
-            state, taken = descent_step(problem, state, res, ab, bw, delta)
-        if taken is None and norms[-1] > level:
-            state, taken = line_search(problem, state, delta, res)
+        return _within_tolerance(problem, state, ab, bw, res, delta, size, tolerance,
+                                 corrections[-2], it)
+    taken = None
+    if norms[-1] <= level:
+        # the floor costs two residuals and a solve: only once Newton stops contracting
+        floor = problem.rounding_correction(ab, bw, state, res) \
+            if size > corrections[-2] / 2 else 0.0
+        if tolerance < floor and size <= NOISE * floor:
+            return state, None, *_rounding_limited(
+                f"the residual ({norms[-1]:.1e}) is at its rounding level ({level:.1e}) "
+                f"and the Newton correction ({size:.1e}) is of the size of the one "
+                f"that undoes rounding the path's unknowns by one unit in the last "
+                f"place ({floor:.1e})", max(size, floor), tolerance)
+        state, taken = natural_step(problem, state, delta, ab, bw, size)
+    if taken is None and problem.minimise:
+        state, taken = descent_step(problem, state, res, ab, bw, delta)
+    if taken is None and norms[-1] > level:
+        state, taken = line_search(problem, state, delta, res)
     if taken is None:
         if norms[-1] <= level:  # no descent left below the rounding level
             return state, None, *_rounding_limited(
@@ -291,6 +278,40 @@ def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list,
                 f"{size:.1e}", size, tolerance)
         return state, None, Status.STALLED, f"line search stalled at iteration {it}"
     return state, taken, None, ""
+
+
+def _within_tolerance(problem, state, ab, bw: int, res, delta, size: float,
+                      tolerance: float, previous: float, it: int):
+    """The iteration once the full Newton correction Δ of ``state`` is within the
+    tolerance: (state, step taken, status or None, message) as :func:`_iteration`.
+
+    To first order the error of ``state`` is at most ‖Δ‖∞ plus the rounding noise of R
+    amplified by J⁻¹, which the rounding floor estimates
+    (:meth:`.assembly.Problem.rounding_correction`, with this J and R): SUCCESS when the
+    sum is within the tolerance, returning state + Δ, closer still where Newton
+    contracts. A correction small by cancellation against that noise (the heavy top with
+    rotors at N = 10⁴ passed two in a row below 1.9e-7 by luck, its multipliers 1e-6
+    off) is caught by the floor; a first small correction that did not halve the one
+    before is judged at the next iteration. Where the floor exceeds the tolerance, or a
+    non-contracting correction and the floor together do, the path is
+    ``ILL_CONDITIONED``."""
+    moved = problem.moved(state, delta, 1.0)    # round-off defeats a line search
+    if moved is None:
+        return state, None, Status.STALLED, (
+            f"the full Newton step leaves the retraction's chart at iteration {it}")
+    contracting = size <= previous / 2
+    if not contracting and previous > tolerance:
+        return moved, size, None, ""
+    floor = problem.rounding_correction(ab, bw, state, res)
+    if size + floor <= tolerance:
+        return moved, size, Status.SUCCESS, (
+            f"; last Newton correction {size:.1e}, rounding floor {floor:.1e}")
+    if contracting and floor < tolerance:
+        return moved, size, None, ""
+    return moved, size, *_rounding_limited(
+        f"the Newton correction ({size:.1e}) is within the tolerance, but with the one "
+        f"that undoes rounding the path's unknowns by one unit in the last place "
+        f"({floor:.1e}) it bounds the error by {size + floor:.1e}", size + floor, tolerance)
 
 
 def _rounding_limited(finding: str, attainable: float, tolerance: float):

@@ -37,10 +37,16 @@ class Curvature:
     pivot: float
 
 
-def second_order(ab: np.ndarray, bw: int, constraint_rows: np.ndarray) -> Curvature:
+def second_order(ab: np.ndarray, bw: int, constraint_rows: np.ndarray,
+                 pivot=None) -> Curvature:
     """The second-order test at a KKT point, from the Newton matrix in the band storage of
     ``assembly.Problem.assemble`` (ab[2 bw + row − col, col] = J[row, col]) and the mask of its
-    constraint rows (= multiplier columns)."""
+    constraint rows (= multiplier columns). ``pivot``: without constraints, a function
+    giving the first non-positive Cholesky pivot of sym(J), or None when there is none
+    (:func:`.band.cholesky_pivot`, in C); by default LAPACK's."""
+    if pivot is not None and not constraint_rows.any():
+        bad = pivot()
+        return Curvature(bad is None, 0.0, 0.0 if bad is None else bad)
     W, AtA, ratio = _blocks(ab, bw, constraint_rows)
     pivot = -np.inf
     for k in PENALTIES if AtA is not None else (0.0,):
