@@ -219,8 +219,12 @@ class Problem:
         m, s = self.model, self.model.constraints
         blocks = self._blocks(path)
         scaled = np.array(m.info.get("step_scaled") or [False] * m.n, dtype=bool)
-        before = np.abs(path.f[np.maximum(blocks - 1, 0)])
-        after = np.abs(path.f[np.minimum(blocks, path.f.shape[0] - 1)])
-        eta = np.where(scaled, self.h * np.maximum(before, after), before)
-        lam = np.abs(path.lam[blocks - 1]) if s else np.zeros((len(blocks), 0))
+        # blocks run from node T0 ≥ 1 to N − T0: the elements before and after each node
+        # exist, so slices (no fancy-index copies) select them
+        first, last = int(blocks[0]), int(blocks[-1])
+        eta = np.abs(path.f[first - 1:last])
+        if scaled.any():
+            after = np.abs(path.f[first:last + 1])
+            eta[:, scaled] = self.h * np.maximum(eta[:, scaled], after[:, scaled])
+        lam = np.abs(path.lam[first - 1:last]) if s else np.zeros((len(blocks), 0))
         return np.concatenate([eta, lam], axis=1).reshape(-1)

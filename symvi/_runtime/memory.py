@@ -10,6 +10,10 @@ import os
 
 GIB = 2.0**30
 
+#: Requests below this many bytes are not checked: any machine that runs Python has them
+#: to spare, and reading the system's figure costs more than a small solve's iteration.
+SMALL = 2.0**26
+
 
 def available_bytes() -> float | None:
     """Memory the system can give this process without swapping (Linux: MemAvailable),
@@ -30,6 +34,8 @@ def available_bytes() -> float | None:
 def require(needed: float, what: str, hint: str) -> None:
     """Raise MemoryError (naming ``what``, the estimate and ``hint``) when ``needed``
     bytes exceed the memory available."""
+    if needed < SMALL:
+        return
     available = available_bytes()
     if available is not None and needed > available:
         raise MemoryError(f"{what} needs about {needed / GIB:.3g} GiB but only "

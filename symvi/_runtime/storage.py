@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .memory import available_bytes, require
+from .memory import SMALL, available_bytes, require
 
 
 @dataclass
@@ -70,6 +70,8 @@ def check_memory(model, elements: int, keep: int, buffered: int) -> None:
     nodes = elements // keep + 1
     per_node = float(bytes_per_node(model))
     needed = per_node * (nodes + buffered)
+    if needed < SMALL:
+        return
     available = available_bytes() or needed
     # the smallest multiple of keep whose path would fill at most half of the memory
     fitting = keep * max(2, int(np.ceil(needed / (0.5 * available))))
