@@ -50,9 +50,8 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
         are unchanged.
     maxiter, xtol, ftol : SUCCESS when the full Newton correction ‖Δ‖∞ — the estimate
         of the error left in the path (unknowns: node corrections and multipliers) —
-        is at most xtol·(1 + size) in two iterations in a row (at the rounding level
-        one correction can be small by cancellation), size the largest unknown, or
-        when ‖R‖∞ ≤ ftol.
+        plus the rounding floor below is at most xtol·(1 + size), size the largest
+        unknown (:func:`_within_tolerance`), or when ‖R‖∞ ≤ ftol.
         Where the residual reaches its rounding level first, its norm is noise: the
         full step is taken if it passes Deuflhard's natural monotonicity test, else
         the cost's descent step is tried; a path whose correction still exceeds the
@@ -62,11 +61,10 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
         second-order models (with or without constraints, on pair, matrix-group and
         action factors) solve for the same corrections with the lifted system from
         N = 2000 on (κ ∝ N², :mod:`.lifted`): cubic_spline within 3e-12 of the exact
-        cubic at N = 10⁵, where the node formulation reached 4e-5. A SUCCESS also
-        needs the correction that undoes rounding the path's unknowns by one unit in
-        the last place to be within the tolerance
-        (:meth:`.assembly.Problem.rounding_correction`): two small corrections in a
-        row can be luck where that floor is larger. The default of 100
+        cubic at N = 10⁵, where the node formulation reached 4e-5. The rounding
+        floor is the correction that undoes rounding the path's unknowns by one unit in
+        the last place (:meth:`.assembly.Problem.rounding_correction`): a small
+        correction can be luck where that floor is larger. The default of 100
         iterations (SLSQP's) leaves room for constrained problems started far from
         feasibility: the non-planar heavy top from the chord guess takes 52–73.
         Optimal-control problems are globalised on their cost (with constraints: its
