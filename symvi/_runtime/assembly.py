@@ -43,6 +43,7 @@ class Problem:
         #: the rounding floor and simplified corrections reuse it.
         self._factored = None
         self._last = None       # (path, assembly) of the last assembly with a Jacobian
+        self._rows = None       # constraint_rows' mask
         self.gauge = None
 
     def merit(self, path: Path) -> tuple[float, float]:
@@ -202,9 +203,14 @@ class Problem:
         return np.arange(t0, path.x.shape[0] - t0)
 
     def constraint_rows(self, path: Path) -> np.ndarray:
-        """Mask of the multiplier unknowns (= constraint rows) in the block layout."""
+        """Mask of the multiplier unknowns (= constraint rows) in the block layout (kept
+        per number of nodes: read-only)."""
         n, s = self.model.n, self.model.constraints
-        return np.tile(np.r_[np.zeros(n, bool), np.ones(s, bool)], len(self._blocks(path)))
+        count = len(self._blocks(path))
+        if self._rows is None or len(self._rows) != count * (n + s):
+            self._rows = np.tile(np.concatenate([np.zeros(n, bool), np.ones(s, bool)]), count)
+            self._rows.flags.writeable = False
+        return self._rows
 
     def multipliers(self, path: Path) -> np.ndarray:
         """The multipliers λ in the block layout (their rows of :meth:`constraint_rows`)."""
