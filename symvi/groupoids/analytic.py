@@ -176,6 +176,15 @@ def rational_coefficients(family: Family, a: int, b: int) -> tuple[sp.Expr, ...]
                  for c in _closed_forms(family, a, b))
 
 
+def minus_identity_coefficients(family: Family, a: int, b: int, s: sp.Symbol) -> list[sp.Expr]:
+    """f(M) − I = Σ_k d_k(s) M^k: the rational coefficients of ``family`` in the symbol
+    ``s``, d_0 = c_0 − 1 cancelled symbolically (no cancellation in floating point for
+    small M, which keeps an increment's relative precision)."""
+    values = [c.xreplace({_S: s}) for c in rational_coefficients(family, a, b)]
+    values[0] = sp.cancel(values[0] - 1)
+    return values
+
+
 def _polynomial(values, M: sp.Matrix) -> sp.Matrix:
     """Σ_k values[k] M^k."""
     out, power = sp.zeros(*M.shape), sp.eye(M.shape[0])
