@@ -6,7 +6,7 @@ the example's horizon.
 
 For N = 10³, 10⁴, 10⁵: the solve with the default tolerance (its status: where rounding
 limits the accuracy, ILL_CONDITIONED with the attainable accuracy), then with a
-tolerance above that floor (xtol = 1e-8, 1e-8, 5e-6), with iterations, seconds per
+tolerance above that floor (xtol = 1e-8, 1e-7, 1e-5), with iterations, seconds per
 iteration and the optimal cost; the cost's observed order of convergence in h. At
 N = 10⁴ the node formulation (κ ∝ N⁴) is timed on the same problem as the baseline;
 the last line is ``ratio: <lifted / node solve time at N = 10⁴>`` (the node formulation
@@ -31,7 +31,7 @@ from symvi.build import compile_model  # noqa: E402
 from symvi.models import get  # noqa: E402
 
 NAME = "heavy_top_rotors_oc_variational"
-LOOSE = {1_000: 1e-8, 10_000: 1e-8, 100_000: 5e-6}
+LOOSE = {1_000: 1e-8, 10_000: 1e-7, 100_000: 1e-5}
 
 
 def solve(module, N: int, **options):

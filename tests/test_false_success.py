@@ -133,8 +133,9 @@ def test_rounding_floor_of_the_heavy_top_at_ten_thousand_steps(compiled):
 @pytest.mark.slow
 def test_heavy_top_at_a_hundred_thousand_steps(compiled):
     """heavy_top_rotors_oc_variational (an action groupoid with multipliers, one of them
-    exactly dependent) at N = 10⁵ with a tolerance above its rounding floor (2e-4 on
-    multipliers of 190): a SUCCESS at a verified minimum in a few iterations of the
+    exactly dependent) at N = 10⁵ with a tolerance well above its rounding floor (2e-4
+    on multipliers of 190; at N = 10⁴ 2e-6, so that xtol = 1e-8 there is a toss-up
+    between SUCCESS and ILL_CONDITIONED): a SUCCESS at a verified minimum in a few iterations of the
     lifted system, and a cost that converges at order one in h over N = 10³, 10⁴, 10⁵
     (the rest-to-rest ends hold at t = h/2 and T − h/2): successive differences shrink
     tenfold (measured 10.08)."""
@@ -142,7 +143,7 @@ def test_heavy_top_at_a_hundred_thousand_steps(compiled):
     mod, ex = compiled(name), get(name).example
     T = ex.h * ex.n_steps
     costs = []
-    for N, xtol in ((1_000, 1e-9), (10_000, 1e-8), (100_000, 5e-6)):
+    for N, xtol in ((1_000, 1e-9), (10_000, 1e-7), (100_000, 1e-5)):
         result = mod.solve_bvp(ex.start, ex.end, N, T / N, xtol=xtol)
         assert result.success, (N, result.message)
         assert result.iterations <= 6, (N, result.iterations)
