@@ -254,7 +254,8 @@ def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list,
                                  corrections[-2], it)
     taken = None
     if norms[-1] <= level:
-        # the floor costs two residuals and a solve: only once Newton stops contracting
+        # the floor costs an update, a residual and a solve: only once Newton stops
+        # contracting
         floor = problem.rounding_correction(ab, bw, state, res) \
             if size > corrections[-2] / 2 else 0.0
         if tolerance < floor and size <= NOISE * floor:
