@@ -228,10 +228,10 @@ def increment(g0: np.ndarray, g1: np.ndarray, h: float) -> np.ndarray:
 
 
 def casadi_functions(h: float, inertia: np.ndarray, g_last: np.ndarray):
-    """(L_d, step, end) as CasADi SX functions: L_d(ξ_w, ξ_{w+1}) = h·½|τ/I|² with
+    """(L_d, step, end, torque) as CasADi SX functions: L_d(ξ_w, ξ_{w+1}) = h·½|τ/I|² with
     Ω = (ξ_w+ξ_{w+1})/2, Ω̇ = (ξ_{w+1}−ξ_w)/h, τ = IΩ̇ + Ω×IΩ (paper eq. ``sdfinal``, ERRATA
     1–3); step(g, ξ) = g cay(hξ̂) (g as 9 column-major entries); end(g) = vee
-    cay⁻¹(g_{N−1}ᵀ g)."""
+    cay⁻¹(g_{N−1}ᵀ g); torque(ξ_w, ξ_{w+1}) = τ."""
     a, b, g = ca.SX.sym("a", 3), ca.SX.sym("b", 3), ca.SX.sym("g", 9)
     omega, rate = (a + b) / 2, (b - a) / h
     tau = inertia * rate + ca.cross(omega, inertia * omega)
@@ -243,7 +243,8 @@ def casadi_functions(h: float, inertia: np.ndarray, g_last: np.ndarray):
     C = ca.solve(W + ca.SX.eye(3), 2 * (W - ca.SX.eye(3)))
     return (ca.Function("L_d", [a, b], [h * ca.sumsqr(tau / inertia) / 2]),
             ca.Function("step", [g, a], [ca.vec(ca.reshape(g, 3, 3) @ cay)]),
-            ca.Function("end", [g], [ca.vertcat(C[2, 1], C[0, 2], C[1, 0])]))
+            ca.Function("end", [g], [ca.vertcat(C[2, 1], C[0, 2], C[1, 0])]),
+            ca.Function("torque", [a, b], [tau]))
 
 
 def ipopt_solver(N: int):
@@ -259,7 +260,7 @@ def ipopt_solver(N: int):
     model, h = get(RIGID), T / N
     start, end = (np.asarray(a, float) for a in (model.example.start, model.example.end))
     p = {str(s): v for s, v in model.parameters}
-    L_d, step, end_defect = casadi_functions(h, np.array([p["I1"], p["I2"], p["I3"]]), end[0])
+    L_d, step, end_defect, _ = casadi_functions(h, np.array([p["I1"], p["I2"], p["I3"]]), end[0])
     X, G = ca.SX.sym("xi", 3, N - 2), ca.SX.sym("g", 9, N - 3)
     xi = ca.horzcat(ca.DM(increment(*start, h)), X, ca.DM(increment(*end, h)))
     cost = ca.sum2(L_d.map(N - 1)(xi[:, :-1], xi[:, 1:]))

@@ -90,6 +90,11 @@ def _solve(module, ex, steps: int, h: float) -> int:
         print(f"controls   max |u| per control = {np.array2string(peak, precision=6)}")
     if result.multipliers is not None:
         print(f"multipliers max |λ| = {np.abs(result.multipliers).max():.6g}")
+    if result.active is not None:
+        active = [f"{name} on {count}" for name, count in
+                  zip(result.inequalities, result.active.sum(axis=0)) if count]
+        print(f"bounds     active of {result.active.shape[0]} windows: "
+              f"{', '.join(active) or 'none'}")
     return 0 if result.success else 1
 
 

@@ -479,7 +479,9 @@ def test_jacobians_match_central_differences(name, compiled, derived):
     mod, dm = compiled(name), derived(name)
     kernels = [k for k in dm.kernels if "jacobian" in dict(k.outputs)]
     constrained = {"constraint"} if dm.constraint_count else {"step"}
-    assert {k.name for k in kernels} == constrained | ({"stencil"} if dm.whole_trajectory else set())
+    bounded = {"inequality"} if dm.inequality_names else set()
+    assert {k.name for k in kernels} == \
+        constrained | bounded | ({"stencil"} if dm.whole_trajectory else set())
     p = list(dm.defaults)
     for kernel in kernels:
         rng = np.random.default_rng(zlib.crc32(f"{name}:{kernel.name}".encode()))

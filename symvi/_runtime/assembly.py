@@ -216,7 +216,7 @@ class Problem:
         """The multipliers λ in the block layout (their rows of :meth:`constraint_rows`)."""
         if not self.model.constraints:
             return np.zeros(0)
-        return path.lam[self._blocks(path) - 1].reshape(-1)
+        return path.lam[self._blocks(path) - 1, :self.model.constraints].reshape(-1)
 
     def magnitudes(self, path: Path) -> np.ndarray:
         """Magnitude of every unknown, in the block layout of the C assembler: a node
@@ -232,5 +232,5 @@ class Problem:
         if scaled.any():
             after = np.abs(path.f[first:last + 1])
             eta[:, scaled] = self.h * np.maximum(eta[:, scaled], after[:, scaled])
-        lam = np.abs(path.lam[first - 1:last]) if s else np.zeros((len(blocks), 0))
+        lam = np.abs(path.lam[first - 1:last, :s]) if s else np.zeros((len(blocks), 0))
         return np.concatenate([eta, lam], axis=1).reshape(-1)

@@ -19,6 +19,7 @@ from . import arguments
 from .assembly import Problem
 from .band import cholesky_pivot, product
 from .gauge import check_boundary
+from .interior import bounded
 from .globalisation import descent_step, line_search, natural_step
 from .optimality import second_order
 from .paths import Path, initial_path
@@ -69,7 +70,9 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
         feasibility: the non-planar heavy top from the chord guess takes 52–73.
         Optimal-control problems are globalised on their cost (with constraints: its
         ℓ1 exact penalty S + ν‖Φ_d‖₁) with a shifted Hessian and Armijo backtracking,
-        other problems and the last steps by backtracking on ‖R‖₂.
+        other problems and the last steps by backtracking on ‖R‖₂. With inequalities
+        (bounded controls) the solve is a primal–dual interior-point Newton
+        (:mod:`.interior`, whose docstring states its SUCCESS rule); ``ftol`` is unused.
     raise_on_failure : raise :class:`NewtonError` (carrying the failed result and its
         iteration history) instead of returning a failed result.
     """
@@ -89,6 +92,10 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
     if isinstance(path, BVPResult):
         return path.raise_for_status() if raise_on_failure else path
     problem = Problem(model, p, h)
+    if model.inequalities:
+        result = bounded(model, problem, path, maxiter, xtol,
+                         None if isinstance(guess, BVPResult) else _unbounded)
+        return result.raise_for_status() if raise_on_failure else result
     if info.get("gauges"):
         check_boundary(model, path, problem.perturbed(path), p, h)
     path, norms, steps, status, message = _newton(problem, path, maxiter, xtol, ftol)
@@ -108,6 +115,15 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
         step_norms=np.array(steps), status=status, message=message))
     result = _finite(result)
     return result.raise_for_status() if raise_on_failure else result
+
+
+def _unbounded(problem: Problem, path: Path, maxiter: int, xtol: float):
+    """(optimum or None, Newton iterations): the problem without its inequalities (their
+    multipliers held at zero) solved from ``path``, the interior-point solve's start
+    (:func:`.interior.bounded`); None where that solve fails."""
+    solved, _, steps, status, _ = _newton(problem, path.copy(), maxiter, xtol, 0.0)
+    problem.shift, problem.penalty = 0.0, 0.0
+    return (solved if status == Status.SUCCESS else None), len(steps)
 
 
 def _minimum(problem: Problem, path: Path, message: str) -> tuple[Status, str]:

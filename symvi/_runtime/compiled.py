@@ -28,6 +28,8 @@ class CompiledModel:
         self.n: int = info["fibre_dim"]
         #: s, the constraints per window (multipliers λ^k ∈ R^s).
         self.constraints: int = info.get("constraints", 0)
+        #: The inequalities c ≤ 0 of every window (bounded optimal control), by name.
+        self.inequalities: tuple[str, ...] = tuple(info.get("inequalities", ()))
         self.parameter_names: tuple[str, ...] = tuple(info["parameters"])
         self.parameter_defaults: tuple[float, ...] = tuple(info["defaults"])
 

@@ -147,8 +147,10 @@ def initial_path(model, start, end, N: int, guess, p, h):
     f = fibres(model, x, g, p, h, lambda k: f"the initial path: w_{k} = g_{k}⁻¹ g_{k + 1}")
     if isinstance(f, BVPResult):
         return f
-    windows = N + 1 - r if model.constraints else 0
-    lam = np.zeros((windows, model.constraints))
+    # every window's λ, then the multipliers z of its inequalities (the C layout)
+    count = model.constraints + len(model.inequalities)
+    windows = N + 1 - r if count else 0
+    lam = np.zeros((windows, count))
     if previous is not None:
         f, lam = _kept(model, previous, x, g, f, lam)
     check_consistent(model, x, f, p, h, "boundary data or guess")

@@ -58,6 +58,10 @@ class Status(enum.IntEnum):
     #: Hessian of the Lagrangian is not positive definite on the constraints' tangent
     #: space): a saddle or maximum of the cost (:mod:`.optimality`).
     SADDLE = 8
+    #: An optimal-control problem whose constraints the iterates cannot meet: the
+    #: infeasibility stopped decreasing far from zero (issue 21; the message names the
+    #: worst constraint and its window).
+    INFEASIBLE = 9
 
 
 class NewtonError(RuntimeError):
@@ -183,6 +187,14 @@ class BVPResult(_Result):
     multipliers : (N−r+1, s) multipliers λ^k of the windows (constrained models), else None.
     controls : (N−r+1, c) controls u_k at each window's quadrature point (optimal-control
         problems: u = EL(L)_a of the discrete path), else None.
+    bound_multipliers : (N−r+1, I) multipliers z ≥ 0 of the inequalities c ≤ 0 of every
+        window (bounded optimal control, named by ``inequalities``), else None.
+    active : (N−r+1, I) where an inequality is active (its multiplier exceeds its slack
+        −c), else None.
+    inequalities : the names of the inequalities, e.g. ``"tau1 <= tau_max"``.
+    history : per interior-point iteration, arrays ``mu`` (barrier parameter per unit
+        time), ``primal`` and ``dual`` infeasibility, ``complementarity`` (max s·z) and
+        ``alpha`` (step length; 0 where μ fell), like IPOPT's log; else None.
     cost : Σ_k L_d over the windows — the discrete cost J_d of an optimal-control problem,
         the action sum otherwise.
     iterations : Newton iterations taken.
@@ -204,6 +216,10 @@ class BVPResult(_Result):
     controls: np.ndarray | None = None
     cost: float | None = None
     kind: str = ""
+    bound_multipliers: np.ndarray | None = None
+    active: np.ndarray | None = None
+    inequalities: tuple[str, ...] = ()
+    history: dict | None = None
 
     def __repr__(self) -> str:
         final = {name: getattr(self, name) for name in ("x", "g", "f")

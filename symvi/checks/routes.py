@@ -59,7 +59,9 @@ def _direction_names(G) -> list[str]:
 
 
 def _residual_kernel(derived):
-    for name in ("stencil", "step"):
+    # the step kernel where there is one: a bounded model's stencil also weighs its
+    # inequalities, which route 2 does not (without them the two are one residual)
+    for name in ("step", "stencil"):
         try:
             return derived.kernel(name)
         except StopIteration:

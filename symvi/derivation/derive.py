@@ -80,6 +80,8 @@ class DerivedModel:
     #: Number s of constraints per window (multipliers λ^k ∈ R^s) and of controls.
     constraint_count: int = 0
     control_count: int = 0
+    #: The inequalities c ≤ 0 per window (their count is the ``inequality`` kernel's rows).
+    inequality_names: tuple[str, ...] = ()
     #: Per fibre coordinate: an increment divided by h (a group factor's ξ).
     step_scaled: tuple[bool, ...] = ()
     #: Names of the conserved quantities F_Z of the ``noether`` kernel.
@@ -142,8 +144,8 @@ def _stencil(dm: DiscreteModel, elements: int, windows: int = 0) -> _Stencil:
     x0 = tuple(sp.Dummy(f"x_{i}", real=True) for i in range(g.source_dim))
     fs = tuple(tuple(sp.Dummy(f"f{k}_{i}", real=True) for i in range(g.fibre_dim))
                for k in range(elements))
-    lams = tuple(tuple(sp.Dummy(f"lam{w}_{a}", real=True) for a in range(len(dm.multipliers)))
-                 for w in range(windows))
+    lams = tuple(tuple(sp.Dummy(f"lam{w}_{a}", real=True)
+                       for a in range(len(dm.window_multipliers))) for w in range(windows))
     z = x0 + tuple(s for f in fs for s in f) + tuple(s for lam in lams for s in lam)
     xs, definitions, jacobian_definitions = [x0], [], []
     D = [_selector(x0, z)]
@@ -170,18 +172,21 @@ class _Engine:
     """Node variations of the (augmented) action sum of one discrete model.
 
     With constraints the varied function is L_d + λ_A Φ^A_d, λ the multipliers of the
-    window (paper §3.2, eq. ``constrainedso``).
+    window (paper §3.2, eq. ``constrainedso``), and with inequalities c ≤ 0 also + z·c
+    (the Lagrangian of the interior-point solve).
     """
 
     def __init__(self, dm: DiscreteModel):
         self.dm = dm
-        augmented = dm.lagrangian + sum(l * c for l, c in zip(dm.multipliers, dm.constraints))
+        augmented = dm.lagrangian + sum(
+            l * c for l, c in zip(dm.window_multipliers, dm.window_constraints))
         self.gradients = tuple(
             sp.Matrix([sp.diff(augmented, s) for s in x + f]) for x, f in dm.slots)
 
     def _window_mapping(self, st: _Stencil, w: int) -> dict:
-        lams = st.multipliers[w] if w < len(st.multipliers) else (0,) * len(self.dm.multipliers)
-        mapping = dict(zip(self.dm.multipliers, lams))
+        own = self.dm.window_multipliers
+        lams = st.multipliers[w] if w < len(st.multipliers) else (0,) * len(own)
+        mapping = dict(zip(own, lams))
         for j, (X, F) in enumerate(self.dm.slots):
             mapping.update(zip(X, st.xs[w + j]))
             mapping.update(zip(F, st.fs[w + j]))
@@ -215,14 +220,17 @@ def _stack(vectors) -> sp.Matrix:
 
 def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
     engine, r, g = _Engine(dm), dm.order, dm.groupoid
-    constrained = bool(dm.constraints)
+    constrained, windowed = bool(dm.constraints), bool(dm.window_constraints)
     sources = fibre_sources(dm)
-    full = _stencil(dm, 2 * r, windows=r + 1 if constrained else 0)
+    full = _stencil(dm, 2 * r, windows=r + 1 if windowed else 0)
     residual = engine.variation(full, r, range(r + 1))
     one = _stencil(dm, 1)
     window = _stencil(dm, r)
     target = sp.Matrix(g.target(one.xs[0], one.fs[0], dm.step))
-    kernels = [] if constrained else _step_kernels(dm, engine, full, residual)
+    # with inequalities only, the step map is that of the unbounded problem (z = 0)
+    plain = _stencil(dm, 2 * r) if windowed else full
+    kernels = [] if constrained else _step_kernels(
+        dm, engine, plain, engine.variation(plain, r, range(r + 1)) if windowed else residual)
     kernels += [
         Kernel("target", one.z, (("target", target),), "β(x, f)"),
         Kernel("variations", one.z, (("right", g.right(one.xs[0], one.fs[0], dm.step)),
@@ -246,16 +254,18 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
                 (("residual", residual), ("jacobian", full.total_jacobian(residual))),
                 "residual and its Jacobian with respect to every stencil coordinate "
                 "(multipliers of the r+1 windows last)",
-                full.definitions + full.jacobian_definitions, along=not constrained),
+                full.definitions + full.jacobian_definitions, along=not windowed),
                 full, sources),
             Kernel("move", one.xs[0] + eta, (("x", sp.Matrix(g.move(one.xs[0], eta))),),
                    "base point of a node after the variation g -> g tau(eta)", along=False)]
-    if constrained:
-        phi = engine.window_values(window, 0, dm.constraints)
-        kernels.append(Kernel(
-            "constraint", window.z, (("value", phi), ("jacobian", window.total_jacobian(phi))),
-            "discrete constraints Phi_d on one window and their Jacobian",
-            window.definitions + window.jacobian_definitions))
+    for name, exprs, what in (("constraint", dm.constraints, "discrete constraints Phi_d"),
+                              ("inequality", dm.inequalities, "inequalities c <= 0")):
+        if exprs:
+            values = engine.window_values(window, 0, exprs)
+            kernels.append(Kernel(
+                name, window.z, (("value", values), ("jacobian", window.total_jacobian(values))),
+                f"{what} on one window and their Jacobian",
+                window.definitions + window.jacobian_definitions))
     if sources:
         kernels += _lifted_kernels(dm, engine, window, one)
     if dm.gauges:
@@ -293,7 +303,7 @@ def fibre_sources(dm: DiscreteModel) -> tuple[int, ...]:
     fibre, so the change of coordinates to increments stays linear); () otherwise.
     """
     g = dm.groupoid
-    if dm.order != 2 or not g.whole_trajectory:
+    if dm.order != 2 or not g.whole_trajectory or dm.inequalities:
         return ()
     one = _stencil(dm, 1)
     fibre = {s: i for i, s in enumerate(one.fs[0])}
@@ -538,6 +548,7 @@ def _derive(dm: DiscreteModel) -> DerivedModel:
                         has_energy=dm.order == 1, fingerprint=dm.fingerprint,
                         node_pairs=g.elements_are_node_pairs,
                         constraint_count=len(dm.constraints), control_count=len(dm.controls),
+                        inequality_names=dm.inequality_names,
                         step_scaled=tuple(g.step_scaled()),
                         symmetries=tuple(z.name for z in dm.symmetries)
                         if any(k.name == "noether" for k in kernels) else (),

@@ -48,6 +48,23 @@ class DiscreteModel:
     #: constraints at the window's middle node x₁. The multipliers are then fixed only up
     #: to λ^k + c Z(x_k) (:mod:`symvi.declaration.control`).
     gauges: tuple[tuple[str, tuple[sp.Expr, ...]], ...] = ()
+    #: Inequalities c ≤ 0 on every window (the controls' bounds, slot coordinates), their
+    #: names and their multipliers z ≥ 0: the augmented L_d + λ·Φ_d + z·c of the
+    #: interior-point solve (issue 21).
+    inequalities: tuple[sp.Expr, ...] = ()
+    inequality_names: tuple[str, ...] = ()
+    inequality_multipliers: tuple[sp.Symbol, ...] = ()
+
+    @property
+    def window_multipliers(self) -> tuple[sp.Symbol, ...]:
+        """Every multiplier of one window: λ of the constraints, then z of the
+        inequalities (the layout of a window's multipliers in the compiled kernels)."""
+        return self.multipliers + self.inequality_multipliers
+
+    @property
+    def window_constraints(self) -> tuple[sp.Expr, ...]:
+        """Φ_d, then the inequalities: the functions the window multipliers weigh."""
+        return self.constraints + self.inequalities
 
 
 def slot_symbols(groupoid: Groupoid, order: int) -> tuple[Slot, ...]:
@@ -79,13 +96,18 @@ def discretise(model: "Model") -> DiscreteModel:
         Ld = model.discrete_lagrangian.xreplace(mapping)
         constraints, controls = tuple(c.xreplace(mapping) for c in model.constraints), ()
     multipliers = tuple(sp.Dummy(f"lambda{a}", real=True) for a in range(len(constraints)))
+    named = system.inequalities(controls) if system is not None else ()
     return DiscreteModel(name=model.name, groupoid=g, order=model.order, slots=slots,
                          lagrangian=Ld, step=h, parameters=model.parameter_symbols,
                          defaults=model.parameter_defaults,
                          continuous_lagrangian=model.lagrangian,
                          fingerprint=model.fingerprint(), constraints=constraints,
                          multipliers=multipliers, controls=controls,
-                         symmetries=tuple(model.symmetries), gauges=gauges)
+                         symmetries=tuple(model.symmetries), gauges=gauges,
+                         inequalities=tuple(c for _, c in named),
+                         inequality_names=tuple(n for n, _ in named),
+                         inequality_multipliers=tuple(sp.Dummy(f"z{a}", real=True)
+                                                      for a in range(len(named))))
 
 
 def node_variation(groupoid: Groupoid, lagrangian: sp.Expr, rule: Rule, xs, fs) -> sp.Matrix:

@@ -24,21 +24,29 @@ def quarter_turn() -> np.ndarray:
     return np.eye(3) + K + K @ K   # sin(π/2) = 1, 1 − cos(π/2) = 1
 
 
-def build(retraction: str = "cayley"):
+def slew(name: str, retraction: str, description: str, **options):
+    """The quarter-turn slew of a rigid body with inertia diag(1, 2, 3) as an
+    :func:`~symvi.optimal_control` problem (torques ``tau1…3``), with ``options`` (e.g.
+    bounds and their parameters) passed on."""
     G = SO3(retraction=retraction)
     Omega = sp.Matrix(G.xi)
     I = sp.symbols("I1 I2 I3", positive=True)
     u = sp.symbols("tau1 tau2 tau3", real=True)
     suffix = "" if retraction == "cayley" else f"_{retraction}"
-    R_N = quarter_turn()
+    parameters = dict(zip(I, (1.0, 2.0, 3.0))) | options.pop("parameters", {})
+    bounds = options.pop("bounds", lambda u: None)(u)
     return optimal_control(
-        name=f"rigid_body_oc{suffix}", groupoid=G,
+        name=f"{name}{suffix}", groupoid=G,
         lagrangian=(Omega.T * sp.diag(*I) * Omega)[0] / 2,
         cost=sum((ui / Ii) ** 2 for ui, Ii in zip(u, I)) / 2, controls=u,
-        parameters=dict(zip(I, (1.0, 2.0, 3.0))),
-        example=Example(h=T / N, n_steps=N, start=[np.eye(3)] * 2, end=[R_N] * 2),
-        description=f"Optimal control of a rigid body on SO(3): min ½∫|τ/I|², "
-                    f"{retraction} retraction (paper §3.3.4).")
+        parameters=parameters, bounds=bounds,
+        example=Example(h=T / N, n_steps=N, start=[np.eye(3)] * 2, end=[quarter_turn()] * 2),
+        description=f"{description}, {retraction} retraction", **options)
+
+
+def build(retraction: str = "cayley"):
+    return slew("rigid_body_oc", retraction,
+                "Optimal control of a rigid body on SO(3): min ½∫|τ/I|² (paper §3.3.4)")
 
 
 model = build()

@@ -1,0 +1,94 @@
+"""The inequalities c ≤ 0 of an interior-point whole-trajectory solve (issue 21).
+
+Each window w of an optimal-control path carries inequalities c_w ≤ 0 (the controls'
+bounds), written with slacks s_w > 0 as c_w + s_w = 0 and multipliers z_w > 0. The
+primal–dual interior-point method is Newton's method on the perturbed KKT system
+
+    ∇S + Φ_dᵀλ + Gᵀz = 0,   Φ_d = 0,   c + s = 0,   s_j z_j = μ,
+
+G = ∂c/∂η. Per window, the linearised last two rows give the slack and multiplier steps
+
+    Δs = −(c + s) − GΔη,    Δz = (μ + z c + z GΔη) / s,
+
+so they are eliminated window by window (:meth:`Inequalities.add_barrier`, in C): the
+reduced system is the equality-constrained Newton system with W + GᵀΣG, Σ = diag(z/s),
+and the residual ∇ℒ + Gᵀ(z c + μ)/s — the same band, one iteration still O(N).
+"""
+from __future__ import annotations
+
+import numpy as np
+from numpy.lib.stride_tricks import sliding_window_view
+
+from .paths import Path
+
+#: Fraction-to-the-boundary parameter's floor: a step keeps s and z at least (1 − τ) of
+#: their current values, τ = max(TAU_MIN, 1 − μ) (Wächter & Biegler 2006, eq. 15).
+TAU_MIN = 0.99
+
+
+class Inequalities:
+    """The compiled inequalities of one model along paths of ``n_nodes`` nodes: their
+    values c (windows × I) and node Jacobians G (windows × I × (r + 1) n)."""
+
+    def __init__(self, model, n_nodes: int):
+        self.model, self.n_nodes = model, n_nodes
+        self.names: tuple[str, ...] = tuple(model.info["inequalities"])
+        r, n = model.order, model.n
+        self.windows = n_nodes - r
+        self.values = np.zeros((self.windows, len(self.names)))
+        self.jacobian = np.zeros((self.windows, len(self.names), (r + 1) * n))
+
+    def evaluate(self, path: Path, p, h: float, with_jacobian: bool = False) -> bool:
+        """c (and G) at ``path`` into :attr:`values` (and :attr:`jacobian`); whether
+        they are finite."""
+        m = self.model
+        jac = m.ptr(self.jacobian) if with_jacobian else m.ffi.NULL
+        return m.lib.symvi_bvp_barrier(m.ptr(path.x), m.ptr(path.f), self.n_nodes, m.ptr(p),
+                                       h, m.ffi.NULL, m.ffi.NULL, 0.0, m.ptr(self.values),
+                                       jac, m.ffi.NULL, m.ffi.NULL) == 0
+
+    def add_barrier(self, path: Path, p, h: float, z: np.ndarray, s: np.ndarray, mu: float,
+                    res: np.ndarray, ab: np.ndarray | None) -> bool:
+        """Evaluate c and G at ``path`` and add the eliminated slack and multiplier steps
+        to the residual and band (unless None) of :meth:`.assembly.Problem.assemble`
+        (module docstring); whether everything is finite."""
+        m = self.model
+        z, s = np.ascontiguousarray(z), np.ascontiguousarray(s)
+        return m.lib.symvi_bvp_barrier(m.ptr(path.x), m.ptr(path.f), self.n_nodes, m.ptr(p),
+                                       h, m.ptr(z), m.ptr(s), mu, m.ptr(self.values),
+                                       m.ptr(self.jacobian), m.ptr(res),
+                                       m.ffi.NULL if ab is None else m.ptr(ab.T)) == 0
+
+    def linearised(self, delta: np.ndarray, blocks: np.ndarray, width: int) -> np.ndarray:
+        """GΔη per window (windows × I), Δη the node part of a correction in the block
+        layout (``blocks``: the node of each block of ``width`` unknowns)."""
+        n, r = self.model.n, self.model.order
+        eta = np.zeros((self.n_nodes, n))
+        eta[blocks] = delta.reshape(-1, width)[:, :n]
+        first, last = r, self.n_nodes - 1 - r        # fixed nodes do not move
+        eta[:first], eta[last + 1:] = 0.0, 0.0
+        windows = sliding_window_view(eta, r + 1, axis=0)      # (W, n, r + 1)
+        stacked = windows.transpose(0, 2, 1).reshape(self.windows, -1)
+        return np.einsum("wkj,wj->wk", self.jacobian, stacked)
+
+
+def boundary_step(values: np.ndarray, step: np.ndarray, tau: float) -> float:
+    """The largest α ≤ 1 with values + α·step ≥ (1 − τ)·values (values > 0): the
+    fraction-to-the-boundary rule."""
+    shrinking = step < 0.0
+    if not shrinking.any():
+        return 1.0
+    return float(min(1.0, (-tau * values[shrinking] / step[shrinking]).min()))
+
+
+def next_barrier(mu: float, floor: float, kappa: float = 0.2, theta: float = 1.5) -> float:
+    """The monotone (Fiacco–McCormick) decrease of IPOPT: μ ← max(floor, min(κμ, μ^θ)),
+    linear at first and superlinear near the end (Wächter & Biegler 2006, eq. 7)."""
+    return max(floor, min(kappa * mu, mu ** theta))
+
+
+def safeguarded(z: np.ndarray, s: np.ndarray, mu: float, kappa: float = 1e10) -> np.ndarray:
+    """z projected into [μ/(κ s), κμ/s]: the primal–dual Σ = z/s may not stray from the
+    primal barrier's μ/s² by more than κ (Wächter & Biegler 2006, eq. 16), which keeps
+    the reduced Newton matrix from losing the barrier's curvature."""
+    return np.clip(z, mu / (kappa * s), kappa * mu / s)

@@ -1,0 +1,392 @@
+"""Primal–dual interior-point whole-trajectory Newton for optimal control with
+inequalities (issue 21).
+
+Newton's method on the perturbed KKT system of min S = Σ L_d subject to Φ_d = 0 and
+c ≤ 0 on every window (:mod:`.barrier`), with the slack and multiplier steps eliminated
+per window so that each iteration solves the equality solver's band. The barrier
+parameter falls monotonically (IPOPT's rule, :func:`.barrier.next_barrier`) once the
+barrier problem is solved to its own accuracy; steps keep s, z > 0 by the
+fraction-to-the-boundary rule and are globalised by Armijo backtracking on the ℓ1
+exact penalty of the barrier problem, S − μh Σ log s + ν(‖Φ_d‖₁ + ‖c + s‖₁), with the
+equality solver's inertia correction of the node block (:mod:`.globalisation`).
+
+μ is measured per unit time: the barrier term of a window is μh log s, as the cost's
+is h L̃, so one schedule fits every N.
+
+SUCCESS needs the full Newton correction of the unperturbed KKT system (μ = 0, the
+true optimality conditions with s_j z_j = 0) at the returned path — in every unknown:
+node corrections, multipliers λ and z, slacks — within xtol·(1 + size), and a minimum
+(the reduced Hessian of the Lagrangian positive definite, as for the equality solver).
+Where that system is non-singular (strict complementarity, independent active
+constraints, second-order sufficiency) the correction is the first-order estimate of the
+distance to the KKT point, the same bound the equality solver's rule uses.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .barrier import (TAU_MIN, Inequalities, boundary_step, next_barrier, safeguarded)
+from .globalisation import curvature
+from .optimality import second_order
+from .band import cholesky_pivot
+from .paths import Path
+from .results import BVPResult, Status
+
+#: Initial barrier parameter (per unit time) and the factor on xtol of its floor.
+MU_START, MU_FLOOR = 0.1, 1e-3
+#: The barrier problem counts as solved when its Newton correction is within this
+#: multiple of μ (IPOPT's κ_ε).
+KAPPA_EPSILON = 10.0
+#: Relative size of a correction below which a full step whose merit decrease is rounding
+#: may be taken by the natural monotonicity test instead (:meth:`InteriorPoint._natural`).
+NEAR = 1e-6
+
+
+class InteriorPoint:
+    """The interior-point iteration on one :class:`.assembly.Problem` and path."""
+
+    def __init__(self, problem, path: Path, xtol: float):
+        self.problem, self.model, self.xtol = problem, problem.model, xtol
+        m = self.model
+        self.s_count = m.constraints
+        self.inequalities = Inequalities(m, path.x.shape[0])
+        self.blocks = problem._blocks(path)
+        self.width = m.n + m.constraints
+        self.rows = problem.constraint_rows(path)
+        self.nodes = ~self.rows
+        self.mu, self.floor = MU_START, MU_FLOOR * xtol
+        self.history: dict[str, list] = {k: [] for k in (
+            "mu", "primal", "dual", "complementarity", "alpha")}
+        self.inequalities.evaluate(path, problem.p, problem.h)
+        c = self.inequalities.values
+        self.s = np.maximum(-c, 1e-2 * (1.0 + np.abs(c)))
+        path.lam[:, self.s_count:] = self.mu * problem.h / self.s
+
+    def z(self, path: Path) -> np.ndarray:
+        return path.lam[:, self.s_count:]
+
+    # -- the linear algebra of one iteration ---------------------------------------------
+    def system(self, path: Path):
+        """Assemble and factorise the reduced system at ``path``: (res, ab, bw, stencil
+        residual norms) or None where something is not finite."""
+        p, h = self.problem.p, self.problem.h
+        res, ab, bw, finite = self.problem.assemble(path, True)
+        dual = float(np.abs(res[self.nodes]).max(initial=0.0))
+        eq = float(np.abs(res[self.rows]).max(initial=0.0))
+        self.stencil = res.copy()
+        finite &= self.inequalities.add_barrier(path, p, h, self.z(path), self.s,
+                                                self.mu * h, res, ab)
+        return (res, ab, bw, dual, eq) if finite else None
+
+    def steps(self, delta: np.ndarray, path: Path, mu: float, c: np.ndarray | None = None):
+        """(Δs, Δz, GΔη) of the eliminated rows for the reduced correction ``delta``; c
+        the inequalities at ``path`` (default: the last evaluated)."""
+        Gd = self.inequalities.linearised(delta, self.blocks, self.width)
+        c = self.inequalities.values if c is None else c
+        z, s = self.z(path), self.s
+        return -(c + s) - Gd, (mu + z * c + z * Gd) / s, Gd
+
+    def barrier_rhs(self, mu: float) -> np.ndarray:
+        """Gᵀ(μ/s) in the block layout: what the barrier adds to the reduced residual."""
+        n, r = self.model.n, self.model.order
+        G, v = self.inequalities.jacobian, mu / self.s
+        nodes = np.zeros((self.inequalities.n_nodes, n))
+        weighted = np.einsum("wkj,wk->wj", G, v)
+        for j in range(r + 1):
+            nodes[j:j + weighted.shape[0]] += weighted[:, j * n:(j + 1) * n]
+        out = np.zeros((len(self.blocks), self.width))
+        out[:, :n] = nodes[self.blocks]
+        free = (self.blocks >= r) & (self.blocks < self.inequalities.n_nodes - r)
+        out[~free] = 0.0
+        return out.reshape(-1)
+
+    def size(self, path: Path) -> float:
+        return max(self.problem.size(path), float(self.s.max(initial=0.0)))
+
+    def kkt_correction(self, ab, bw: int, res: np.ndarray, path: Path) -> float:
+        """‖(Δη, Δλ, Δz)‖∞ of the full Newton correction of the unperturbed KKT system
+        (μ = 0, s_j z_j = 0) at ``path``, from the reduced system's factorisation: the
+        first-order estimate of the distance to its KKT point, barrier's bias included.
+        Not Δs, which is Δη's noise amplified by G (:meth:`_barrier_error`)."""
+        delta = self.problem.solve(ab, bw, -(res - self.barrier_rhs(self.mu * self.problem.h)))
+        return self._barrier_error(delta, self.steps(delta, path, 0.0)[1], path)
+
+    # -- the iteration -------------------------------------------------------------------
+    def solve(self, path: Path, maxiter: int):
+        """Iterate from ``path``: (path, iterations, status, message)."""
+        from scipy.linalg import LinAlgError
+
+        for it in range(maxiter):
+            try:
+                path, status, message = self.iteration(path, it)
+            except LinAlgError as exc:
+                return path, it, Status.SINGULAR_JACOBIAN, (
+                    f"singular Newton matrix at interior-point iteration {it} ({exc})")
+            if status is not None:
+                return (path, it + (status is not Status.SUCCESS),
+                        *self._infeasible(path, status, message))
+        return path, maxiter, *self._infeasible(path, Status.MAX_ITERATIONS, (
+            f"the interior-point method did not converge in {maxiter} iterations "
+            f"(barrier parameter {self.mu:.1e}, {self._last_errors()})"))
+
+    def _infeasible(self, path: Path, status: Status, message: str) -> tuple[Status, str]:
+        """A stalled or exhausted solve whose primal infeasibility stopped decreasing
+        (less than 10 % over the last ten iterations) away from zero is INFEASIBLE, with
+        the worst violated constraint; other outcomes are kept."""
+        primal = self.history["primal"]
+        if status not in (Status.STALLED, Status.MAX_ITERATIONS) or len(primal) < 10 \
+                or primal[-1] <= 1e-6 or primal[-1] < 0.9 * primal[-10]:
+            return status, message
+        p, h = self.problem.p, self.problem.h
+        self.inequalities.evaluate(path, p, h)
+        c = self.inequalities.values
+        w, k = np.unravel_index(int(np.argmax(c)), c.shape)
+        worst = (f"the worst inequality, {self.inequalities.names[k]!r}, is violated by "
+                 f"{c[w, k]:.3g} at window {w} (t = {(w + 1) * h:.4g})" if c[w, k] > 0 else
+                 f"the constraints Φ_d are violated by up to {primal[-1]:.3g}")
+        return Status.INFEASIBLE, (
+            f"the constraints cannot be met: the infeasibility stopped decreasing at "
+            f"{primal[-1]:.3g} ({message}); {worst}. Loosen the bounds or lengthen the "
+            f"horizon")
+
+    def iteration(self, path: Path, it: int):
+        h = self.problem.h
+        system = self.system(path)
+        if system is None:
+            return path, Status.NON_FINITE, (
+                f"non-finite residual, Jacobian or inequality at interior-point iteration {it}")
+        res, ab, bw, dual, eq = system
+        self._record(path, dual, eq)
+        tolerance = self.xtol * (1.0 + self.problem.size(path))
+        while True:
+            delta = self.problem.solve(ab, bw, -res)
+            ds, dz, Gd = self.steps(delta, path, self.mu * h)
+            error = self._barrier_error(delta, dz, path)
+            correction = self.kkt_correction(ab, bw, res, path)
+            if max(error, correction) <= tolerance:
+                return path, Status.SUCCESS, (
+                    f"; Newton correction of the KKT system (μ = 0) {correction:.1e} "
+                    f"within xtol·(1 + size) = {tolerance:.1e} (barrier parameter "
+                    f"{self.mu:.1e}), {self._last_errors()}")
+            # μ falls once its barrier problem is solved, and only while its bias (the
+            # μ = 0 correction beyond the barrier problem's own) exceeds the tolerance:
+            # a smaller μ only adds rounding (Σ = z/s grows as 1/μ on active rows)
+            biased = correction - error > tolerance / 2
+            if error > KAPPA_EPSILON * self.mu * (1.0 + self.problem.size(path)) \
+                    or self.mu <= self.floor or not biased:
+                break
+            # the barrier problem is solved: the same matrix serves the next μ
+            mu = next_barrier(self.mu, self.floor)
+            res = res - self.barrier_rhs((self.mu - mu) * h)
+            self.mu = mu
+        moved = self._step(path, res, ab, bw, delta, ds, dz, Gd, error)
+        if moved is None:
+            return path, Status.STALLED, (
+                f"the interior-point line search stalled at iteration {it} (barrier "
+                f"parameter {self.mu:.1e}, {self._last_errors()})")
+        return moved, None, ""
+
+    @staticmethod
+    def _barrier_error(delta, dz, path: Path) -> float:
+        """The barrier problem's remaining error: its full Newton correction in the node
+        corrections, λ and z. Not in the slacks: Δs = −(c + s) − GΔη carries Δη's noise
+        amplified by G (∂u/∂η ∝ 1/h² for controls), and s is c's function anyway."""
+        return max(float(np.abs(delta).max(initial=0.0)), float(np.abs(dz).max(initial=0.0)))
+
+    def _record(self, path: Path, dual: float, eq: float) -> None:
+        c, z = self.inequalities.values, self.z(path)
+        self.history["mu"].append(self.mu)
+        self.history["primal"].append(max(eq, float(np.abs(c + self.s).max(initial=0.0))))
+        self.history["dual"].append(dual)
+        self.history["complementarity"].append(float((self.s * z).max(initial=0.0)))
+
+    def _last_errors(self) -> str:
+        hist = self.history
+        return (f"primal infeasibility {hist['primal'][-1]:.1e}, dual infeasibility "
+                f"{hist['dual'][-1]:.1e}, complementarity {hist['complementarity'][-1]:.1e}")
+
+    def minimum(self, path: Path, message: str) -> tuple[Status, str]:
+        """The second-order test at the converged path: the Hessian W of the Lagrangian
+        S + λ·Φ_d + z·c positive definite on the tangent space of the equalities and
+        the active inequalities (second-order sufficient conditions). W + ρG_AᵀG_A, G_A
+        the active inequalities' gradients, goes to :func:`.optimality.second_order`
+        for growing ρ (Debreu's lemma, as for the equality rows). Not the reduced matrix
+        W + GᵀΣG of the iteration: near the end Σ exceeds W by 10¹³ on active rows and
+        its Cholesky factorisation is rounding. SUCCESS, or SADDLE."""
+        problem, ineq = self.problem, self.inequalities
+        _, ab, bw, finite = problem.assemble(path, True)
+        active = (self.z(path) > self.s).astype(float)
+        scale = float(np.abs(ab[2 * bw][self.nodes]).max(initial=0.0))
+        gradient = float((ineq.jacobian ** 2).sum(axis=2).max(initial=0.0))
+        verdict = None
+        for rho in (0.0, 1.0, 1e2, 1e4, 1e6) if finite else ():
+            work = np.array(ab, order="F")
+            weight = np.ascontiguousarray(active * rho * scale / max(gradient, 1e-300))
+            ineq.add_barrier(path, problem.p, problem.h, weight, np.ones_like(weight), 0.0,
+                             np.zeros(ab.shape[1]), work)
+            verdict = second_order(work, bw, self.rows,
+                                   lambda: cholesky_pivot(self.model, work, bw))
+            if verdict.minimum:
+                return Status.SUCCESS, message
+        pivot = "" if verdict is None else f" (Cholesky pivot {verdict.pivot:.1e})"
+        return Status.SADDLE, (
+            f"converged to a KKT point{message}, but not to a verified minimum: the Hessian "
+            f"of the Lagrangian is not positive definite on the tangent space of the "
+            f"equalities and active inequalities{pivot} — a saddle or maximum; start from "
+            f"another guess")
+
+    def result(self, path: Path, iterations: int, status: Status, message: str) -> BVPResult:
+        """The :class:`BVPResult` of the solve, with the bound multipliers, the active
+        set and the iteration history."""
+        model, problem = self.model, self.problem
+        h, p, s_count = problem.h, problem.p, self.s_count
+        N = path.x.shape[0] - 1
+        z = np.array(self.z(path))
+        return BVPResult(
+            t=h * np.arange(N + 1), iterations=iterations,
+            residual_norms=np.array(self.history["dual"]),
+            step_norms=np.array([a for a in self.history["alpha"] if a > 0]),
+            status=status, message=message,
+            x=path.x if model.m else None, f=path.f,
+            g=model.configurations(path.g) if model.matrix_dims else None,
+            multipliers=np.array(path.lam[:, :s_count]) if s_count else None,
+            controls=model.along_vector("controls", path.x, path.f, h, p),
+            cost=float(model.along_vector("lagrangian", path.x, path.f, h, p).sum()),
+            kind=model.info["kind"], bound_multipliers=z, active=z > self.s,
+            inequalities=self.inequalities.names,
+            history={k: np.array(v) for k, v in self.history.items()})
+
+    # -- globalisation -------------------------------------------------------------------
+    def merit(self, path: Path, s: np.ndarray, nu: float) -> float:
+        """The barrier problem's ℓ1 exact penalty S − μh Σ log s + ν(‖Φ_d‖₁ + ‖c + s‖₁)."""
+        problem = self.problem
+        if not self.inequalities.evaluate(path, problem.p, problem.h):
+            return np.inf
+        value = problem.merit(path)[0] - self.mu * problem.h * float(np.log(s).sum()) \
+            + nu * float(np.abs(self.inequalities.values + s).sum())
+        if self.rows.any():
+            res, _, _, finite = problem.assemble(path, False)
+            value = value + nu * float(np.abs(res[self.rows]).sum()) if finite else np.inf
+        return value
+
+    def _step(self, path: Path, res, ab, bw: int, delta, ds, dz, Gd, error: float):
+        """A step along the reduced correction (shifted where it is no descent or meets
+        negative curvature, as in :func:`.globalisation.descent_step`), cut by the
+        fraction-to-the-boundary rule and Armijo backtracking on :meth:`merit`; near
+        the solution, where the merit's rounding hides the step's decrease, the full
+        step by Deuflhard's natural monotonicity test (:meth:`_natural`). The moved
+        path, or None."""
+        from scipy.linalg import LinAlgError
+
+        problem, mu = self.problem, self.mu * self.problem.h
+        c, nodes = self.inequalities.values.copy(), self.nodes
+        scale = float(np.abs(ab[2 * bw][nodes]).max(initial=0.0))
+        # the curvature test, not the inertia of a Cholesky factorisation: near the end
+        # Σ's entries exceed W's by 10¹⁰ and more, and that factorisation fails by rounding
+        shift = problem.shift
+        while shift <= 1e3:
+            if shift > 0.0:
+                try:
+                    delta = problem.solve(ab, bw, -res, shift * scale, nodes)
+                except LinAlgError:
+                    shift = max(10 * shift, 1e-8)
+                    continue
+                ds, dz, Gd = self.steps(delta, path, mu, c)
+            moved = self._backtrack(path, ab, bw, delta, ds, dz, Gd, c, shift * scale)
+            if moved is None and shift == 0.0 and error <= NEAR * (1.0 + problem.size(path)):
+                moved = self._natural(path, ab, bw, delta, ds, dz, error)
+            if moved is not None:
+                problem.shift = shift / 10 if shift > 1e-10 else 0.0
+                return moved
+            shift = max(10 * shift, 1e-8)
+        return None
+
+    def _backtrack(self, path: Path, ab, bw: int, delta, ds, dz, Gd, c, shift: float):
+        """Armijo backtracking on :meth:`merit` from the fraction-to-the-boundary step,
+        if ``delta`` is a descent direction with positive curvature; else None."""
+        problem, mu = self.problem, self.mu * self.problem.h
+        rows, nodes = self.rows, self.nodes
+        z, s = self.z(path).copy(), self.s
+        lam, phi_d = problem.multipliers(path), self.stencil[rows]
+        infeasibility = float(np.abs(phi_d).sum() + np.abs(c + s).sum())
+        # ν ≥ 1.5 max |multiplier| after the step, by Powell's rule as in descent_step
+        wanted = 1.5 * max(float(np.abs(lam + delta[rows]).max(initial=0.0)),
+                           float(np.abs(z + dz).max(initial=0.0)))
+        nu = problem.penalty = max(wanted, 0.5 * (problem.penalty + wanted))
+        descent = float(self.stencil[nodes] @ delta[nodes] + lam @ phi_d - (z * Gd).sum()) \
+            - mu * float((ds / s).sum()) - nu * infeasibility
+        if curvature(self.model, ab, bw, delta, nodes, shift) <= 0 or descent >= 0:
+            return None
+        cost, noise = problem.merit(path)
+        if -descent <= noise * (1 + nu):
+            return None
+        base = cost - mu * float(np.log(s).sum()) + nu * infeasibility
+        tau = max(TAU_MIN, 1.0 - self.mu)
+        alpha = boundary_step(s, ds, tau)
+        while alpha >= 2.0**-20:
+            trial = problem.moved(path, delta, alpha)
+            if trial is not None and \
+                    self.merit(trial, s + alpha * ds, nu) <= base + 1e-4 * alpha * descent:
+                return self._accept(trial, s + alpha * ds, z, dz, boundary_step(z, dz, tau),
+                                    alpha)
+            alpha /= 2
+        return None
+
+    def _natural(self, path: Path, ab, bw: int, delta, ds, dz, error: float):
+        """The full step (to the boundary) if the correction the same reduced matrix gives
+        at the moved path is smaller than ``error``, the one it makes: Deuflhard's natural
+        monotonicity test, which needs no merit function. Else None."""
+        problem, h = self.problem, self.problem.h
+        tau = max(TAU_MIN, 1.0 - self.mu)
+        alpha, z = boundary_step(self.s, ds, tau), self.z(path).copy()
+        trial = problem.moved(path, delta, alpha)
+        if trial is None:
+            return None
+        s = self.s + alpha * ds
+        trial.lam[:, self.s_count:] = safeguarded(z + boundary_step(z, dz, tau) * dz, s, self.mu * h)
+        res, _, _, finite = problem.assemble(trial, False)
+        finite = finite and self.inequalities.add_barrier(
+            trial, problem.p, h, self.z(trial), s, self.mu * h, res, None)
+        if not finite:
+            return None
+        simplified = problem.solve(ab, bw, -res)
+        if not float(np.abs(simplified).max(initial=0.0)) < error:
+            return None
+        self.s = s
+        self.history["alpha"].append(alpha)
+        return trial
+
+    def _accept(self, trial: Path, s: np.ndarray, z, dz, alpha_z: float, alpha: float) -> Path:
+        self.s = s
+        trial.lam[:, self.s_count:] = safeguarded(z + alpha_z * dz, s, self.mu * self.problem.h)
+        self.history["alpha"].append(alpha)
+        return trial
+
+
+def bounded(model, problem, path: Path, maxiter: int, xtol: float,
+            unbounded=None) -> BVPResult:
+    """The interior-point solve of :func:`.bvp.solve_bvp` for a model with inequalities:
+    its result, SUCCESS only at a verified minimum within the tolerance (module
+    docstring).
+
+    ``unbounded(problem, path, maxiter, xtol)`` → (optimum or None, iterations), where
+    given (a cold start), first solves the problem without inequalities from the guess;
+    the interior-point iteration starts from that optimum where it exists (from the
+    guess otherwise), and the result counts both solves' iterations. The equality solver's
+    globalisation is the better tested of the two far from a solution: from perturbed
+    guesses whose torques exceed the bounds 400-fold, the interior-point steps were cut
+    to α ≈ 10⁻² by the fraction-to-the-boundary rule and stalled; from the unbounded
+    optimum it needs 20–30 iterations.
+    """
+    start, first = unbounded(problem, path, maxiter, xtol) if unbounded is not None \
+        else (None, 0)
+    phase = (f"from the optimum without bounds ({first} Newton iterations), "
+             if start is not None else "")
+    path = start if start is not None else path
+    ip = InteriorPoint(problem, path, xtol)
+    path, iterations, status, message = ip.solve(path, maxiter)
+    if status == Status.SUCCESS:
+        status, message = ip.minimum(path, message)
+        message = f"{phase}interior point converged in {iterations} iterations{message}" \
+            if status == Status.SUCCESS else message
+    return ip.result(path, first + iterations, status, message)

@@ -1,0 +1,225 @@
+"""Optimal control with bounded controls: the interior-point whole-trajectory solve (issue 21).
+
+The torque-limited slew (:mod:`symvi.models.spacecraft_slew`) is the rigid body of
+``test_independent_optimum`` with |τ_i| ≤ τ_max on every window. Its discrete problem is
+written again there in plain NumPy (Lie midpoint stencil, Cayley reconstruction, the
+product defect); here SLSQP minimises it with the bounds as inequality constraints, from
+a perturbed start, and must find symvi's optimum. Asserted besides: symvi's path is
+feasible in that code, the KKT conditions hold at it (primal feasibility, complementarity,
+z ≥ 0), and the bounds are active on the same windows in both solutions.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from scipy.optimize import minimize
+
+import sympy as sp
+
+from symvi import SO3, ModelError, optimal_control
+from test_independent_optimum import FTOL, MAXITER, RigidBody, cs_derivative, perturb
+
+N_SLSQP = 40
+
+
+class BoundedSlew(RigidBody):
+    """The rigid-body problem with |τ_i| ≤ τ_max: inequalities τ_max ∓ τ ≥ 0."""
+
+    def __init__(self, N, tau_max):
+        super().__init__("spacecraft_slew", N)
+        self.tau_max = tau_max
+
+    def slack(self, z):
+        tau = self.controls(z)
+        flat = np.concatenate([self.tau_max - tau, self.tau_max + tau], -1)
+        return flat.reshape(flat.shape[:-2] + (-1,))
+
+
+def bounded_minimum(prob, z0):
+    """SLSQP on J_d with the product defect and the bounds, in the preconditioned
+    variables of ``test_independent_optimum.direct_minimum``."""
+    h = prob.h
+    Ju = cs_derivative(lambda z: (prob.controls(z) / prob.scale).reshape(z.shape[:-1] + (-1,)),
+                       z0)
+    Jc = cs_derivative(prob.constraints, z0)
+    lam, V = np.linalg.eigh(h * Ju.T @ Ju + Jc.T @ Jc / h)
+    P = V / np.sqrt(np.maximum(lam, 1e-10 * lam.max()))
+    J0 = prob.cost(z0)
+
+    def z_of(y):
+        return z0 + y @ P.T
+
+    def f(y):
+        return prob.cost(z_of(y)) / J0
+
+    def eq(y):
+        return prob.constraints(z_of(y))
+
+    def ineq(y):
+        return prob.slack(z_of(y))
+
+    cons = [dict(type="eq", fun=eq, jac=lambda y: cs_derivative(eq, y)),
+            dict(type="ineq", fun=ineq, jac=lambda y: cs_derivative(ineq, y))]
+    res = minimize(f, np.zeros(z0.size), jac=lambda y: cs_derivative(f, y), method="SLSQP",
+                   constraints=cons, options=dict(ftol=FTOL, maxiter=MAXITER))
+    return res, z_of(res.x)
+
+
+@pytest.fixture(scope="module")
+def slew(compiled):
+    return compiled("spacecraft_slew")
+
+
+def test_same_optimum_as_slsqp_and_kkt(slew):
+    """symvi's bounded optimum: feasible and KKT in independent code, the same cost as
+    SLSQP's from a perturbed start (1e-8 relative), the same active windows."""
+    tau_max = 11.0
+    prob = BoundedSlew(N_SLSQP, tau_max)
+    r = slew.solve_bvp(*prob.boundary, N_SLSQP, prob.h)
+    assert r.success, r.message
+    z = prob.from_symvi(r)
+    assert abs(prob.cost(z) - r.cost) <= 1e-10 * r.cost
+    np.testing.assert_allclose(prob.controls(z), r.controls, rtol=0, atol=1e-9 * tau_max)
+    # KKT at symvi's solution: feasible, z ≥ 0, complementary
+    c = np.concatenate([r.controls - tau_max, -tau_max - r.controls], -1)
+    assert r.inequalities == ("tau1 <= tau_max", "tau1 >= -tau_max", "tau2 <= tau_max",
+                              "tau2 >= -tau_max", "tau3 <= tau_max", "tau3 >= -tau_max")
+    c = c[:, [0, 3, 1, 4, 2, 5]]            # in the order of r.inequalities
+    assert c.max() <= 1e-9 and np.abs(prob.defect(z)).max() <= 1e-9
+    assert (r.bound_multipliers >= 0).all()
+    assert np.abs(r.bound_multipliers * c).max() <= 1e-9
+    assert r.active.any() and not r.active.all(), "the bounds should be active on part of the arc"
+    np.testing.assert_array_equal(r.active, c > -1e-6)
+
+    z0 = perturb(prob, z, 0.05, seed=2026)
+    res, z_opt = bounded_minimum(prob, z0)
+    assert res.success, res.message
+    assert prob.slack(z_opt).min() >= -1e-9 and np.abs(prob.defect(z_opt)).max() <= 1e-9
+    rel = (prob.cost(z_opt) - r.cost) / r.cost
+    tau = prob.controls(z_opt)
+    active = np.concatenate([tau >= tau_max - 1e-6, tau <= -tau_max + 1e-6], -1)
+    print(f"\nN={N_SLSQP}: symvi J={r.cost:.14g} in {r.iterations} iterations, SLSQP "
+          f"J={prob.cost(z_opt):.14g} ({res.nit} iterations), rel {rel:.1e}, active "
+          f"windows {int(r.active.sum())}")
+    assert abs(rel) <= 1e-8
+    np.testing.assert_array_equal(r.active, active[:, [0, 3, 1, 4, 2, 5]])
+
+
+def test_unbounded_equations_hold_where_no_bound_is_active(slew):
+    """The variational oracle of ``test_optimal_control`` on the cost S = Σ L_d: stationary
+    at every free node whose three windows have no active bound (there the solution
+    satisfies the unconstrained discrete equations), and not where a bound is active."""
+    from test_optimal_control import N_ORACLE, TOL_ORACLE, oracle
+
+    ex = slew.model.info
+    h = 1.0 / N_ORACLE
+    r = slew.solve_bvp(*BoundedSlew(N_ORACLE, 11.0).boundary, N_ORACLE, h)
+    assert r.success, r.message
+    touched = np.array([r.active[j - 2:j + 1].any() for j in range(2, N_ORACLE - 1)])
+    nodes = np.arange(2, N_ORACLE - 1)
+    rel, noise = oracle("rigid_body_oc", slew, np.zeros((N_ORACLE + 1, 0)), r.g, r.f, None, h,
+                        nodes)
+    print(f"\n{ex['name']}: relative gradient of S ≤ {rel[~touched].max():.1e} at "
+          f"{(~touched).sum()} free nodes, ≥ {rel[touched].min():.1e} at the {touched.sum()} "
+          f"nodes meeting an active bound (noise {noise.max():.1e})")
+    assert touched.any() and (~touched).any()
+    assert rel[~touched].max() < TOL_ORACLE
+    assert rel[touched].min() > 1e3 * TOL_ORACLE
+
+
+def test_infeasible_bounds_are_reported_not_solved(slew):
+    """Below τ_max ≈ 8.99 (N = 40) no slew exists: an epigraph minimisation of the largest
+    violation of the bounds over the same discrete dynamics (SLSQP) gives 0.49 at
+    τ_max = 8.5 — and symvi says INFEASIBLE, naming a bound and its window."""
+    prob = BoundedSlew(N_SLSQP, 8.5)
+    r = slew.solve_bvp(*prob.boundary, N_SLSQP, prob.h, params=dict(tau_max=8.5))
+    assert r.status.name == "INFEASIBLE" and not r.success
+    assert "cannot be met" in r.message and "tau" in r.message and "window" in r.message
+    start = prob.from_symvi(slew.solve_bvp(*prob.boundary, N_SLSQP, prob.h))
+
+    def ineq(v):
+        u = prob.controls(v[..., :-1])
+        u, t = u.reshape(u.shape[:-2] + (-1,)), v[..., -1:]
+        return np.concatenate([prob.tau_max + t - u, prob.tau_max + t + u], -1)
+
+    def eq(v):
+        return prob.constraints(v[..., :-1])
+
+    res = minimize(lambda v: v[-1], np.r_[start, 5.0], jac=lambda v: np.eye(v.size)[-1],
+                   method="SLSQP", options=dict(maxiter=500, ftol=1e-12), constraints=[
+                       dict(type="eq", fun=eq, jac=lambda v: cs_derivative(eq, v)),
+                       dict(type="ineq", fun=ineq, jac=lambda v: cs_derivative(ineq, v))])
+    print(f"\nsmallest largest violation of |τ| ≤ 8.5: {res.x[-1]:.4f} ({res.message})")
+    assert res.success and res.x[-1] > 0.4
+
+
+@pytest.mark.parametrize("N", [100, 1000])
+def test_converges_from_every_guess(slew, N):
+    """From the default (cubic) and chord guesses and 10 seeded perturbations of the
+    cubic one: every solve a SUCCESS at the same minimum (cost to 1e-9 relative)."""
+    ex = slew.model.info
+    prob = BoundedSlew(N, 11.0)
+    reference = slew.solve_bvp(*prob.boundary, N, prob.h)
+    assert reference.success, reference.message
+    guesses = ["chord"]
+    rng = np.random.default_rng(21)
+    s = np.linspace(0, 1, N + 1)[2:-2]
+    for _ in range(10):
+        coefficients = 0.3 * rng.standard_normal((3, 3))
+        bumps = np.sin(np.pi * np.outer(s, [1, 2, 3])) @ coefficients      # (free, 3)
+        guesses.append(np.array([g @ _cay(b) for g, b in zip(reference.g[2:-2], bumps)]))
+    costs, iterations = [], []
+    for guess in guesses:
+        r = slew.solve_bvp(*prob.boundary, N, prob.h, guess=guess)
+        assert r.success, r.message
+        costs.append(r.cost)
+        iterations.append(r.iterations)
+    print(f"\n{ex['name']} N={N}: cost {reference.cost:.12g} ({reference.iterations} "
+          f"iterations); other guesses {min(iterations)}–{max(iterations)} iterations")
+    np.testing.assert_allclose(costs, reference.cost, rtol=1e-9)
+
+
+def _cay(v):
+    from so3 import cay, hat
+    return cay(hat(v))
+
+
+@pytest.mark.parametrize("bounds, pattern", [
+    (lambda u, t: {u[0]: (2.0, 1.0)}, "lower bound 2.0* is not below upper bound 1.0"),
+    (lambda u, t: {"w": (-1, 1)}, "bounds given for 'w', which is not a control"),
+    (lambda u, t: {u[0]: (-t, sp.Symbol("k"))}, r"upper bound of control tau1 uses \['k'\]"),
+    (lambda u, t: {u[0]: 3.0}, "must be a pair"),
+    (lambda u, t: {u[0]: (None, sp.Matrix([1, 2]))}, "upper bound of control tau1"),
+    (lambda u, t: {u[0]: (-sp.oo, 1)}, "not finite"),
+])
+def test_bad_bounds_are_model_errors(bounds, pattern):
+    G = SO3()
+    u = sp.symbols("tau1 tau2 tau3", real=True)
+    t = sp.Symbol("tau_max", positive=True)
+    Omega = sp.Matrix(G.xi)
+    with pytest.raises(ModelError, match=pattern):
+        optimal_control("bad", G, (Omega.T * Omega)[0] / 2, sum(v**2 for v in u) / 2, u,
+                        parameters={t: 1.0}, bounds=bounds(u, t))
+
+
+def test_warm_start_walks_the_torque_limit(slew):
+    """A continuation in τ_max from the previous result (no solve without bounds first):
+    each SUCCESS at the cold-started optimum, the optimal cost falling as the limit
+    rises, and fewer iterations than a cold start."""
+    N = 200
+    prob = BoundedSlew(N, 11.0)
+    previous, costs = None, []
+    for tau_max in (10.0, 10.5, 11.0, 12.0, 14.0):
+        params = dict(tau_max=tau_max)
+        cold = slew.solve_bvp(*prob.boundary, N, prob.h, params=params)
+        assert cold.success, cold.message
+        if previous is not None:
+            warm = slew.solve_bvp(*prob.boundary, N, prob.h, params=params, guess=previous)
+            assert warm.success, warm.message
+            assert abs(warm.cost - cold.cost) <= 1e-9 * cold.cost
+            print(f"\nτ_max = {tau_max}: cost {cold.cost:.10f}, cold {cold.iterations} "
+                  f"iterations, warm {warm.iterations}")
+            assert warm.iterations < cold.iterations
+        costs.append(cold.cost)
+        previous = cold
+    assert np.all(np.diff(costs) < 0)
