@@ -104,4 +104,3 @@ def reciprocal_condition(work: np.ndarray, bw: int) -> float:
                              dtype=float)
     estimate = onenormest(inverse, t=8)
     return 1.0 / (norm * estimate) if np.isfinite(estimate) and estimate > 0 else 0.0
-
