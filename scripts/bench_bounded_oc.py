@@ -1,18 +1,19 @@
 """Torque-limited slew: symvi's interior-point whole-trajectory Newton against CasADi + IPOPT.
 
 The bundled ``spacecraft_slew`` (rigid body on SO(3), rest to rest through a quarter turn
-about (1,1,1)/√3 in T = 1, min ½∫|τ/I|², |τ_i| ≤ τ_max = 11, issue 21) at N = 1000, in one
-run:
+about (1,1,1)/√3 in T = 1, min ½∫|τ/I|², |τ_i| ≤ τ_max = 11 and the rate limit
+|Ω_i| ≤ ω_max = 10, inactive, issue 21) at N = 1000, in one run:
 
 * symvi: ``solve_bvp`` from its default guess (the model is compiled first, cached; the
   symbolic compile is excluded), best of as many solves as fit in about a second;
 * IPOPT (when CasADi is importable: ``pip install '.[bench]'``): the same discrete
   problem — L_d(ξ_w, ξ_{w+1}) = h·½|τ_w/I|² with Ω = (ξ_w+ξ_{w+1})/2, Ω̇ = (ξ_{w+1}−ξ_w)/h,
   τ_w = IΩ̇ + Ω×IΩ, the Cayley reconstruction lifted to unknown configurations (the
-  functions of ``bench_bvp.py``), and the bounds −τ_max ≤ τ_w ≤ τ_max as constraint bounds — with exact
-  Hessian, MUMPS, tol 1e-10 and no bound relaxation (IPOPT relaxes bounds by 1e-8
-  relative by default, which lowered its cost by 3e-9 relative), from symvi's initial
-  path; set-up excluded, ``solver(...)`` timed likewise.
+  functions of ``bench_bvp.py``), and the bounds −τ_max ≤ τ_w ≤ τ_max and
+  −ω_max ≤ (ξ_w+ξ_{w+1})/2 ≤ ω_max as constraint bounds — with exact Hessian, MUMPS,
+  tol 1e-10 and no bound relaxation (IPOPT relaxes bounds by 1e-8 relative by default,
+  which lowered its cost by 3e-9 relative), from symvi's initial path; set-up excluded,
+  ``solver(...)`` timed likewise.
 
 Printed: both costs (they must agree to 1e-8), iteration counts, solve times, the active
 windows, and last ``ratio: <symvi / IPOPT solve time>`` (target ≤ 0.2; without CasADi
@@ -39,7 +40,7 @@ try:
 except ImportError:
     ca = None
 
-NAME, N, T, TAU_MAX = "spacecraft_slew", 1000, 1.0, 11.0
+NAME, N, T, TAU_MAX, OMEGA_MAX = "spacecraft_slew", 1000, 1.0, 11.0, 10.0
 BUILD = Path(__file__).resolve().parent.parent / "generated"
 
 
@@ -48,7 +49,7 @@ def repeats(once: float, seconds: float = 1.0) -> int:
 
 
 def symvi_solve(module, start, end):
-    h, params = T / N, dict(tau_max=TAU_MAX)
+    h, params = T / N, dict(tau_max=TAU_MAX, omega_max=OMEGA_MAX)
     result = module.solve_bvp(start, end, N, h, params=params)
     once = best_time(lambda: module.solve_bvp(start, end, N, h, params=params), 1)
     seconds = min(once, best_time(lambda: module.solve_bvp(start, end, N, h, params=params),
@@ -66,17 +67,18 @@ def ipopt_problem(module, start, end, inertia):
     xi = ca.horzcat(ca.DM(increment(*start, h)), X, ca.DM(increment(*end, h)))
     cost = ca.sum2(L_d.map(N - 1)(xi[:, :-1], xi[:, 1:]))
     torques = ca.vec(torque.map(N - 1)(xi[:, :-1], xi[:, 1:]))
+    rates = ca.vec((xi[:, :-1] + xi[:, 1:]) / 2)
     following = step.map(N - 2)(ca.horzcat(ca.DM(start[1].flatten(order="F")), G), X)
     equalities = ca.vertcat(ca.vec(following[:, :-1] - G), end_defect(following[:, -1]))
     solver = ca.nlpsol("ipopt", "ipopt", dict(x=ca.vertcat(ca.vec(X), ca.vec(G)), f=cost,
-                                              g=ca.vertcat(equalities, torques)),
+                                              g=ca.vertcat(equalities, torques, rates)),
                        {"print_time": False, "ipopt.print_level": 0, "ipopt.sb": "yes",
                         "ipopt.tol": 1e-10, "ipopt.bound_relax_factor": 0.0})
     count = equalities.shape[0]
-    lbg = np.r_[np.zeros(count), -TAU_MAX * np.ones(torques.shape[0])]
-    ubg = np.r_[np.zeros(count), TAU_MAX * np.ones(torques.shape[0])]
+    limits = np.r_[TAU_MAX * np.ones(torques.shape[0]), OMEGA_MAX * np.ones(rates.shape[0])]
+    lbg, ubg = np.r_[np.zeros(count), -limits], np.r_[np.zeros(count), limits]
     path = initial_path(module.model, start, end, N, None,
-                        module.model.params(dict(tau_max=TAU_MAX)), h)
+                        module.model.params(dict(tau_max=TAU_MAX, omega_max=OMEGA_MAX)), h)
     g0 = path.g.reshape(-1, 3, 3)[2:-2].transpose(0, 2, 1).reshape(-1)   # column-major
     return solver, np.concatenate([path.f[1:-1].reshape(-1), g0]), lbg, ubg
 

@@ -17,22 +17,31 @@ from scipy.optimize import minimize
 import sympy as sp
 
 from symvi import SO3, ModelError, optimal_control
-from test_independent_optimum import FTOL, MAXITER, RigidBody, cs_derivative, perturb
+from test_independent_optimum import (FTOL, MAXITER, RigidBody, cs_derivative, lie_point,
+                                      perturb)
 
 N_SLSQP = 40
 
 
 class BoundedSlew(RigidBody):
-    """The rigid-body problem with |τ_i| ≤ τ_max: inequalities τ_max ∓ τ ≥ 0."""
+    """The rigid-body problem with |τ_i| ≤ τ_max per window and |Ω_i| ≤ ω_max at each
+    window's midpoint Ω = (ξ_w + ξ_{w+1})/2."""
 
-    def __init__(self, N, tau_max):
+    def __init__(self, N, tau_max, omega_max=10.0):
         super().__init__("spacecraft_slew", N)
-        self.tau_max = tau_max
+        self.tau_max, self.omega_max = tau_max, omega_max
+
+    def values(self, z):
+        """c ≤ 0 per window, in the order of symvi's ``inequalities``: per axis
+        τ − τ_max, −τ_max − τ; then per axis Ω − ω_max, −ω_max − Ω."""
+        tau, omega = self.controls(z), lie_point(self.increments(z), self.h)[0]
+        parts = [[t - self.tau_max, -self.tau_max - t] for t in np.moveaxis(tau, -1, 0)] \
+            + [[w - self.omega_max, -self.omega_max - w] for w in np.moveaxis(omega, -1, 0)]
+        return np.stack([c for pair in parts for c in pair], -1)
 
     def slack(self, z):
-        tau = self.controls(z)
-        flat = np.concatenate([self.tau_max - tau, self.tau_max + tau], -1)
-        return flat.reshape(flat.shape[:-2] + (-1,))
+        c = -self.values(z)
+        return c.reshape(c.shape[:-2] + (-1,))
 
 
 def bounded_minimum(prob, z0):
@@ -70,25 +79,28 @@ def slew(compiled):
     return compiled("spacecraft_slew")
 
 
-def test_same_optimum_as_slsqp_and_kkt(slew):
-    """symvi's bounded optimum: feasible and KKT in independent code, the same cost as
-    SLSQP's from a perturbed start (1e-8 relative), the same active windows."""
+@pytest.mark.parametrize("omega_max", [10.0, 1.45])
+def test_same_optimum_as_slsqp_and_kkt(slew, omega_max):
+    """symvi's bounded optimum (torques, and with ω_max = 1.45 the body rates too):
+    feasible and KKT in independent code, the same cost as SLSQP's from a perturbed start
+    (1e-8 relative), the same active windows."""
     tau_max = 11.0
-    prob = BoundedSlew(N_SLSQP, tau_max)
-    r = slew.solve_bvp(*prob.boundary, N_SLSQP, prob.h)
+    prob = BoundedSlew(N_SLSQP, tau_max, omega_max)
+    params = dict(tau_max=tau_max, omega_max=omega_max)
+    r = slew.solve_bvp(*prob.boundary, N_SLSQP, prob.h, params=params)
     assert r.success, r.message
     z = prob.from_symvi(r)
     assert abs(prob.cost(z) - r.cost) <= 1e-10 * r.cost
     np.testing.assert_allclose(prob.controls(z), r.controls, rtol=0, atol=1e-9 * tau_max)
     # KKT at symvi's solution: feasible, z ≥ 0, complementary
-    c = np.concatenate([r.controls - tau_max, -tau_max - r.controls], -1)
-    assert r.inequalities == ("tau1 <= tau_max", "tau1 >= -tau_max", "tau2 <= tau_max",
-                              "tau2 >= -tau_max", "tau3 <= tau_max", "tau3 >= -tau_max")
-    c = c[:, [0, 3, 1, 4, 2, 5]]            # in the order of r.inequalities
+    assert r.inequalities[:2] == ("tau1 <= tau_max", "tau1 >= -tau_max")
+    assert r.inequalities[-2:] == ("Omega3 <= omega_max", "Omega3 >= -omega_max")
+    c = prob.values(z)
     assert c.max() <= 1e-9 and np.abs(prob.defect(z)).max() <= 1e-9
     assert (r.bound_multipliers >= 0).all()
     assert np.abs(r.bound_multipliers * c).max() <= 1e-9
     assert r.active.any() and not r.active.all(), "the bounds should be active on part of the arc"
+    assert r.active[:, 6:].any() == (omega_max < 2), "the rate limit binds iff ω_max < 1.52"
     np.testing.assert_array_equal(r.active, c > -1e-6)
 
     z0 = perturb(prob, z, 0.05, seed=2026)
@@ -96,13 +108,11 @@ def test_same_optimum_as_slsqp_and_kkt(slew):
     assert res.success, res.message
     assert prob.slack(z_opt).min() >= -1e-9 and np.abs(prob.defect(z_opt)).max() <= 1e-9
     rel = (prob.cost(z_opt) - r.cost) / r.cost
-    tau = prob.controls(z_opt)
-    active = np.concatenate([tau >= tau_max - 1e-6, tau <= -tau_max + 1e-6], -1)
-    print(f"\nN={N_SLSQP}: symvi J={r.cost:.14g} in {r.iterations} iterations, SLSQP "
-          f"J={prob.cost(z_opt):.14g} ({res.nit} iterations), rel {rel:.1e}, active "
-          f"windows {int(r.active.sum())}")
+    print(f"\nN={N_SLSQP}, ω_max = {omega_max}: symvi J={r.cost:.14g} in {r.iterations} "
+          f"iterations, SLSQP J={prob.cost(z_opt):.14g} ({res.nit} iterations), rel "
+          f"{rel:.1e}, active windows {int(r.active.any(axis=1).sum())}")
     assert abs(rel) <= 1e-8
-    np.testing.assert_array_equal(r.active, active[:, [0, 3, 1, 4, 2, 5]])
+    np.testing.assert_array_equal(r.active, prob.values(z_opt) > -1e-6)
 
 
 def test_unbounded_equations_hold_where_no_bound_is_active(slew):
@@ -184,42 +194,29 @@ def _cay(v):
     return cay(hat(v))
 
 
-@pytest.mark.parametrize("bounds, pattern", [
-    (lambda u, t: {u[0]: (2.0, 1.0)}, "lower bound 2.0* is not below upper bound 1.0"),
-    (lambda u, t: {"w": (-1, 1)}, "bounds given for 'w', which is not a control"),
-    (lambda u, t: {u[0]: (-t, sp.Symbol("k"))}, r"upper bound of control tau1 uses \['k'\]"),
-    (lambda u, t: {u[0]: 3.0}, "must be a pair"),
-    (lambda u, t: {u[0]: (None, sp.Matrix([1, 2]))}, "upper bound of control tau1"),
-    (lambda u, t: {u[0]: (-sp.oo, 1)}, "not finite"),
+@pytest.mark.parametrize("declared, pattern", [
+    (lambda u, t, W: dict(bounds={u[0]: (2.0, 1.0)}),
+     "lower bound 2.0* is not below upper bound 1.0"),
+    (lambda u, t, W: dict(bounds={W[1]: (t, 0.5)}),
+     "coordinate Omega2: lower bound tau_max is not below upper bound 0.5"),
+    (lambda u, t, W: dict(bounds={"w": (-1, 1)}),
+     "bounds given for 'w', which is not a control or coordinate"),
+    (lambda u, t, W: dict(bounds={u[0]: (-t, sp.Symbol("k"))}),
+     r"upper bound of control tau1 uses \['k'\]"),
+    (lambda u, t, W: dict(bounds={u[0]: 3.0}), "must be a pair"),
+    (lambda u, t, W: dict(bounds={u[0]: (None, sp.Matrix([1, 2]))}), "upper bound of control tau1"),
+    (lambda u, t, W: dict(bounds={u[0]: (-sp.oo, 1)}), "not finite"),
+    (lambda u, t, W: dict(inequalities=[sp.Matrix([W[0], W[1]])]), "inequality 'g0'"),
+    (lambda u, t, W: dict(inequalities={"cone": W[0] - sp.Symbol("c")}),
+     r"inequality 'cone' uses \['c'\]"),
+    (lambda u, t, W: dict(inequalities=[t - 1]), "depends on no coordinate or control"),
 ])
-def test_bad_bounds_are_model_errors(bounds, pattern):
+def test_bad_bounds_and_inequalities_are_model_errors(declared, pattern):
+    """Each bad declaration is a ModelError naming the bound or inequality."""
     G = SO3()
     u = sp.symbols("tau1 tau2 tau3", real=True)
     t = sp.Symbol("tau_max", positive=True)
     Omega = sp.Matrix(G.xi)
     with pytest.raises(ModelError, match=pattern):
         optimal_control("bad", G, (Omega.T * Omega)[0] / 2, sum(v**2 for v in u) / 2, u,
-                        parameters={t: 1.0}, bounds=bounds(u, t))
-
-
-def test_warm_start_walks_the_torque_limit(slew):
-    """A continuation in τ_max from the previous result (no solve without bounds first):
-    each SUCCESS at the cold-started optimum, the optimal cost falling as the limit
-    rises, and fewer iterations than a cold start."""
-    N = 200
-    prob = BoundedSlew(N, 11.0)
-    previous, costs = None, []
-    for tau_max in (10.0, 10.5, 11.0, 12.0, 14.0):
-        params = dict(tau_max=tau_max)
-        cold = slew.solve_bvp(*prob.boundary, N, prob.h, params=params)
-        assert cold.success, cold.message
-        if previous is not None:
-            warm = slew.solve_bvp(*prob.boundary, N, prob.h, params=params, guess=previous)
-            assert warm.success, warm.message
-            assert abs(warm.cost - cold.cost) <= 1e-9 * cold.cost
-            print(f"\nτ_max = {tau_max}: cost {cold.cost:.10f}, cold {cold.iterations} "
-                  f"iterations, warm {warm.iterations}")
-            assert warm.iterations < cold.iterations
-        costs.append(cold.cost)
-        previous = cold
-    assert np.all(np.diff(costs) < 0)
+                        parameters={t: 1.0}, **declared(u, t, G.xi))

@@ -37,6 +37,7 @@ import sympy as sp
 
 from ..errors import ModelError
 from ..groupoids.base import Algebroid, Groupoid
+from .inequalities import declared, discrete
 from .model import Example, Model
 from .symmetry import Symmetry
 from .validation import scalar
@@ -59,21 +60,19 @@ class ControlSystem:
     #: Per control, its (lower, upper) bound: None (unbounded) or an expression in the
     #: parameters, so that a limit can change at run time (issue 21).
     bounds: tuple[tuple[sp.Expr | None, sp.Expr | None], ...] = ()
+    #: Named path inequalities g(q, y, u) ≤ 0, the coordinates' bounds among them
+    #: (:mod:`symvi.declaration.inequalities`).
+    path_inequalities: tuple[tuple[str, sp.Expr], ...] = ()
 
     def fingerprint(self) -> str:
         return ":".join([self.equations, sp.srepr(self.lagrangian), sp.srepr(self.cost),
-                         sp.srepr(self.controls), repr(self.actuated), sp.srepr(self.bounds)])
+                         sp.srepr(self.controls), repr(self.actuated), sp.srepr(self.bounds),
+                         sp.srepr(self.path_inequalities)])
 
-    def inequalities(self, controls: Sequence[sp.Expr]) -> tuple[tuple[str, sp.Expr], ...]:
-        """The bounds as named inequalities c ≤ 0 on the given control expressions (the
-        discrete controls u_k of a window): u − upper and lower − u."""
-        out = []
-        for name, u, (lower, upper) in zip(self.controls, controls, self.bounds):
-            if upper is not None:
-                out.append((f"{name} <= {upper}", u - upper))
-            if lower is not None:
-                out.append((f"{name} >= {lower}", lower - u))
-        return tuple(out)
+    def inequalities(self, controls: Sequence[sp.Expr], average) -> tuple[tuple[str, sp.Expr], ...]:
+        """The named inequalities c ≤ 0 of one window, given its discrete controls and
+        the rule's ``average`` (:func:`symvi.declaration.inequalities.discrete`)."""
+        return discrete(self.bounds, self.path_inequalities, self.controls, controls, average)
 
 
 def euler_lagrange_operator(algebroid: Algebroid, lagrangian: sp.Expr) -> sp.Matrix:
@@ -123,53 +122,14 @@ def _control_symbols(controls, count: int) -> tuple[sp.Symbol, ...]:
     return symbols
 
 
-def _bounds(bounds, controls: tuple[sp.Symbol, ...], parameters: Mapping[Any, float]):
-    """Per control, (lower, upper) as expressions in the parameters or None; checked to be
-    a proper interval at the parameters' default values."""
-    bounds = dict(bounds or {})
-    by_name = {str(u): u for u in controls}
-    defaults = {sp.Symbol(k, real=True) if isinstance(k, str) else k: float(v)
-                for k, v in parameters.items()}
-    out = {u: (None, None) for u in controls}
-    for key, pair in bounds.items():
-        u = by_name.get(str(key))
-        if u is None:
-            raise ModelError(f"bounds given for {key!r}, which is not a control; the controls "
-                             f"are {list(by_name)}")
-        if not isinstance(pair, (tuple, list)) or len(pair) != 2:
-            raise ModelError(f"bounds of control {u} must be a pair (lower, upper), None for an "
-                             f"open side; got {pair!r}")
-        sides = []
-        for side, value in zip(("lower", "upper"), pair):
-            if value is None:
-                sides.append(None)
-                continue
-            expr = scalar(value, f"{side} bound of control {u}")
-            unknown = expr.free_symbols - set(defaults)
-            if unknown:
-                raise ModelError(f"the {side} bound of control {u} uses {sorted(map(str, unknown))}"
-                                 f", which are not parameters; a bound is a number or an "
-                                 f"expression in the parameters")
-            if not sp.sympify(expr.xreplace(defaults)).is_finite:
-                raise ModelError(f"the {side} bound of control {u} is not finite ({expr}); "
-                                 f"give None for an open side")
-            sides.append(expr)
-        lower, upper = sides
-        if lower is not None and upper is not None \
-                and not float(lower.xreplace(defaults)) < float(upper.xreplace(defaults)):
-            raise ModelError(f"control {u}: lower bound {lower} is not below upper bound {upper} "
-                             f"(at the parameters' default values)")
-        out[u] = (lower, upper)
-    return tuple(out[u] for u in controls)
-
-
 def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
                     controls: Sequence[Any] | str, actuated: Sequence[int] | None = None,
                     parameters: Mapping[Any, float] | None = None,
                     discretisation: str | None = None, example: Example | None = None,
                     description: str = "", equations: str = "paper",
                     symmetries: Sequence[Symmetry] = (),
-                    bounds: Mapping[Any, tuple[Any, Any]] | None = None) -> Model:
+                    bounds: Mapping[Any, tuple[Any, Any]] | None = None,
+                    inequalities: Sequence[Any] | Mapping[str, Any] = ()) -> Model:
     """The optimal-control problem min ∫ C(q, y, u) dt of a mechanical system on the
     algebroid of ``groupoid``, as a constrained second-order :class:`Model`.
 
@@ -196,11 +156,17 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
         makes the constraints exactly dependent, and the solver fixes the multipliers'
         freedom it leaves.
     bounds:
-        ``{control: (lower, upper)}``, each side a number, an expression in the
-        parameters (a limit that can change at run time) or None (open); e.g. a
-        thruster that only pushes is ``{u: (0, None)}``. The bounds hold for the
-        discrete controls u_k of every window, and the whole-trajectory solve becomes
-        a primal–dual interior-point Newton (:mod:`symvi._runtime.interior`).
+        ``{symbol: (lower, upper)}`` for controls and for the first-order coordinates
+        (``G.q``, ``G.qdot`` or ``G.xi``: joint and rate limits), each side a number, an
+        expression in the parameters (a limit that can change at run time) or None
+        (open); a thruster that only pushes is ``{u: (0, None)}``.
+    inequalities:
+        Path inequalities g(q, y, u) ≤ 0 (a list, or a mapping name → g), e.g. a
+        keep-out disc ``r**2 - (x - a)**2 - (y - b)**2``. Bounds on coordinates and
+        inequalities hold at every window's quadrature point, bounds on controls for
+        the discrete controls u_k (:mod:`symvi.declaration.inequalities`); with any of
+        them the whole-trajectory solve is a primal–dual interior-point Newton
+        (:mod:`symvi._runtime.interior`).
     """
     if equations not in EQUATIONS:
         raise ModelError(f"equations must be one of {EQUATIONS}, got {equations!r}")
@@ -231,5 +197,5 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
         parameters=parameters, example=example, description=description,
         constraints=[EL[A] for A in range(len(EL)) if A not in directions],
         controls=forces, symmetries=symmetries,
-        control_system=ControlSystem(L, C, u, directions, equations,
-                                     _bounds(bounds, u, parameters)))
+        control_system=ControlSystem(L, C, u, directions, equations, *declared(
+            bounds, inequalities, u, groupoid.continuous_symbols(1), parameters)))

@@ -82,12 +82,11 @@ def discretise(model: "Model") -> DiscreteModel:
     xs, fs = [s[0] for s in slots], [s[1] for s in slots]
     system = model.control_system
     gauges = ()
+    rule = g.rule(model.discretisation) if model.lagrangian is not None else None
     if system is not None and system.equations == "variational":
-        Ld, constraints, controls = _variational_control(system, g, g.rule(model.discretisation),
-                                                         xs, fs)
+        Ld, constraints, controls = _variational_control(system, g, rule, xs, fs)
         gauges = _gauges(model, system, xs[1])
     elif model.lagrangian is not None:
-        rule = g.rule(model.discretisation)
         Ld = rule.build(g, model.lagrangian, xs, fs, h)
         constraints = tuple(rule.build(g, c, xs, fs, h) for c in model.constraints)
         controls = tuple(rule.average(g, u, xs, fs, h) for u in model.controls)
@@ -96,7 +95,8 @@ def discretise(model: "Model") -> DiscreteModel:
         Ld = model.discrete_lagrangian.xreplace(mapping)
         constraints, controls = tuple(c.xreplace(mapping) for c in model.constraints), ()
     multipliers = tuple(sp.Dummy(f"lambda{a}", real=True) for a in range(len(constraints)))
-    named = system.inequalities(controls) if system is not None else ()
+    named = () if system is None else system.inequalities(
+        controls, lambda F: rule.average(g, F, xs, fs, h))
     return DiscreteModel(name=model.name, groupoid=g, order=model.order, slots=slots,
                          lagrangian=Ld, step=h, parameters=model.parameter_symbols,
                          defaults=model.parameter_defaults,
