@@ -140,11 +140,12 @@ def test_unbounded_equations_hold_where_no_bound_is_active(slew):
 def test_infeasible_bounds_are_reported_not_solved(slew):
     """Below τ_max ≈ 8.99 (N = 40) no slew exists: an epigraph minimisation of the largest
     violation of the bounds over the same discrete dynamics (SLSQP) gives 0.49 at
-    τ_max = 8.5 — and symvi says INFEASIBLE, naming a bound and its window."""
+    τ_max = 8.5 — and symvi fails, naming the worst bound and its window."""
     prob = BoundedSlew(N_SLSQP, 8.5)
     r = slew.solve_bvp(*prob.boundary, N_SLSQP, prob.h, params=dict(tau_max=8.5))
-    assert r.status.name == "INFEASIBLE" and not r.success
-    assert "cannot be met" in r.message and "tau" in r.message and "window" in r.message
+    assert r.status.name in ("STALLED", "MAX_ITERATIONS") and not r.success
+    assert "may admit no solution" in r.message and "'tau3 <= tau_max'" in r.message \
+        and "window" in r.message
     start = prob.from_symvi(slew.solve_bvp(*prob.boundary, N_SLSQP, prob.h))
 
     def ineq(v):

@@ -37,10 +37,6 @@ MU_START, MU_FLOOR = 0.1, 1e-3
 #: The barrier problem counts as solved when its Newton correction is within this
 #: multiple of μ (IPOPT's κ_ε).
 KAPPA_EPSILON = 10.0
-#: The infeasibility's relative gradient below which a stalled solve is INFEASIBLE:
-#: measured 0.008–0.019 where the slew's torque limit admits no slew (τ_max = 4, 8, 8.5),
-#: 0.15 at a stall of a feasible planar flyer with a forward-only thruster.
-STATIONARY = 0.05
 #: Relative size of a correction below which a full step whose merit decrease is rounding
 #: may be taken by the natural monotonicity test instead (:meth:`InteriorPoint._natural`).
 NEAR = 1e-6
@@ -94,13 +90,8 @@ class InteriorPoint:
 
     def barrier_rhs(self, mu: float) -> np.ndarray:
         """Gᵀ(μ/s) in the block layout: what the barrier adds to the reduced residual."""
-        return self.adjoint(mu / self.s)
-
-    def adjoint(self, v: np.ndarray, G: np.ndarray | None = None) -> np.ndarray:
-        """Gᵀv in the block layout (node rows; zero on fixed nodes and multiplier rows),
-        v per window and inequality, G the last evaluated Jacobian unless given."""
         n, r = self.model.n, self.model.order
-        G = self.inequalities.jacobian if G is None else G
+        G, v = self.inequalities.jacobian, mu / self.s
         nodes = np.zeros((self.inequalities.n_nodes, n))
         weighted = np.einsum("wkj,wk->wj", G, v)
         for j in range(r + 1):
@@ -140,36 +131,14 @@ class InteriorPoint:
             f"the interior-point method did not converge in {maxiter} iterations "
             f"(barrier parameter {self.mu:.1e}, {self._last_errors()})"))
 
-    def _infeasibility_stationarity(self, path: Path) -> float:
-        """‖∇θ‖₂ / ‖Σ|terms|‖₂ for θ = ½‖c⁺‖² + ½‖Φ_d‖² at ``path``, ∇θ = Gᵀc⁺ + AᵀΦ_d
-        (A = ∂Φ_d/∂η): near 0 at a stationary point of the infeasibility (a local
-        minimum of it where θ > 0: locally infeasible), of order 1 where the
-        infeasibility can still fall."""
-        from scipy.sparse import dia_matrix
-
-        problem = self.problem
-        res, ab, bw, finite = problem.assemble(path, True)
-        if not finite or not self.inequalities.evaluate(path, problem.p, problem.h, True):
-            return np.inf
-        violated = np.maximum(self.inequalities.values, 0.0)
-        G = self.inequalities.jacobian
-        gradient, size = self.adjoint(violated), self.adjoint(violated, np.abs(G))
-        if self.rows.any():
-            n = ab.shape[1]
-            J = dia_matrix((ab[bw:], bw - np.arange(2 * bw + 1)), shape=(n, n)).tocsr()
-            A, phi = J[self.rows][:, self.nodes], res[self.rows]
-            gradient[self.nodes] += A.T @ phi
-            size[self.nodes] += abs(A).T @ np.abs(phi)
-        total = float(np.linalg.norm(size))
-        return float(np.linalg.norm(gradient)) / total if total > 0 else np.inf
-
     def _infeasible(self, path: Path, status: Status, message: str) -> tuple[Status, str]:
-        """A stalled or exhausted solve is INFEASIBLE, with the worst violated constraint,
-        when its primal infeasibility stopped decreasing (less than 10 % over the last ten
-        iterations) above 10⁻³ of the inequalities' scale at a near-stationary point of
-        the infeasibility (:meth:`_infeasibility_stationarity` below
-        :data:`STATIONARY`); other outcomes are kept. Local and heuristic — no
-        restoration phase proves it yet — and never a SUCCESS either way."""
+        """A stalled or exhausted solve whose primal infeasibility stopped decreasing
+        (less than 10 % over the last ten iterations) above 10⁻³ of the inequalities'
+        scale: the message names the worst violated inequality and its window. The
+        status stays: such a stall is not proof that the bounds admit no solution (the
+        planar flyer with a forward-only thruster stalls at 1.1 although it is feasible;
+        a stall of the slew whose torque limit admits none looks the same), and no
+        restoration phase yet tells the two apart."""
         primal = self.history["primal"]
         if status not in (Status.STALLED, Status.MAX_ITERATIONS) or len(primal) < 10 \
                 or primal[-1] < 0.9 * primal[-10]:
@@ -177,24 +146,16 @@ class InteriorPoint:
         p, h = self.problem.p, self.problem.h
         self.inequalities.evaluate(path, p, h)
         c = self.inequalities.values
-        # a stall near feasibility is the method's failure, not the problem's: the
-        # cart-pole with a track limit stalled 3e-6 outside it, at a feasible problem
         if primal[-1] <= 1e-3 * (1.0 + float(np.abs(c).max(initial=0.0))):
             return status, message
-        stationarity = self._infeasibility_stationarity(path)
-        if stationarity > STATIONARY:
-            return status, message + (
-                f"; the infeasibility stopped decreasing at {primal[-1]:.3g}, but could "
-                f"still fall there (relative gradient {stationarity:.2f}): the method "
-                f"failed, not necessarily the problem")
         w, k = np.unravel_index(int(np.argmax(c)), c.shape)
         worst = (f"the worst inequality, {self.inequalities.names[k]!r}, is violated by "
                  f"{c[w, k]:.3g} at window {w} (t = {(w + 1) * h:.4g})" if c[w, k] > 0 else
                  f"the constraints Φ_d are violated by up to {primal[-1]:.3g}")
-        return Status.INFEASIBLE, (
-            f"the constraints cannot be met: the infeasibility stopped decreasing at "
-            f"{primal[-1]:.3g} ({message}); {worst}. Loosen the bounds or lengthen the "
-            f"horizon")
+        return status, (
+            f"{message}; the infeasibility stopped decreasing at {primal[-1]:.3g}: {worst}. "
+            f"The bounds may admit no solution (loosen them or lengthen the horizon), or "
+            f"the method failed from this start (try another guess)")
 
     def iteration(self, path: Path, it: int):
         h = self.problem.h

@@ -58,10 +58,6 @@ class Status(enum.IntEnum):
     #: Hessian of the Lagrangian is not positive definite on the constraints' tangent
     #: space): a saddle or maximum of the cost (:mod:`.optimality`).
     SADDLE = 8
-    #: An optimal-control problem whose constraints the iterates cannot meet: the
-    #: infeasibility stopped decreasing far from zero (issue 21; the message names the
-    #: worst constraint and its window).
-    INFEASIBLE = 9
 
 
 class NewtonError(RuntimeError):
