@@ -1,13 +1,15 @@
-"""The torque-limited slew (issue 21) with plots: controls against their bounds, angular
-velocity, and the bound multipliers, beside the slew without limits.
+"""The torque-limited slews of issue 21 with plots: controls against their bounds, angular
+velocity and the bound multipliers, beside the slew without limits; and the
+near-minimum-time slew.
 
 ``spacecraft_slew`` (rest to rest through a quarter turn about (1,1,1)/√3 in T = 1,
 I = diag(1, 2, 3), N = 1000) is solved for τ_max = 11 and 13 and, for comparison, for
 τ_max = 100 (no bound active: the unbounded optimum). The script prints each outcome
 and writes ``spacecraft_slew.png`` into the output directory (default ``paper_figures/``):
 torques τ_k per window with ±τ_max, Ω_k, and the multipliers z_k/h of the active
-bounds (per unit time, so they do not scale with N). Needs matplotlib
-(``pip install '.[plots]'``).
+bounds (per unit time, so they do not scale with N); and ``minimum_time_slew.png``: the torques
+of the free-horizon slew (min ½∫|τ/I|² + 100·T) for τ_max = 11 and 16 over their optimal
+horizons. Needs matplotlib (``pip install '.[plots]'``).
 
 Run from the repository root: ``python scripts/plot_bounded_oc.py [-o DIR]``.
 """
@@ -67,6 +69,29 @@ def main() -> None:
     finish(fig, axes.ravel(), f"{NAME}: torque-limited rest-to-rest slew, N = {N}",
            out / f"{NAME}.png")
     print(f"wrote {out / f'{NAME}.png'}")
+    plot_minimum_time(out, plt)
+
+
+def plot_minimum_time(out: Path, plt) -> None:
+    """The free-horizon slew's torques for two limits, over their optimal horizons."""
+    name, steps = "minimum_time_slew", 400
+    model = get(name)
+    module = compile_model(model, out / "generated")
+    fig, axes = plt.subplots(3, 1, figsize=(8, 7), sharex=True)
+    for limit, colour in ((11.0, "C0"), (16.0, "C1")):
+        r = module.solve_bvp(model.example.start, model.example.end, steps, 1.0 / steps,
+                             params=dict(tau_max=limit))
+        r.raise_for_status()
+        print(f"{name}, τ_max = {limit:g}: T* = {r.t[-1]:.6f}, cost {r.cost:.8g}")
+        for i, ax in enumerate(axes):
+            ax.plot(midpoints(r.t), r.controls[:, i], color=colour,
+                    label=f"τ_max = {limit:g}, T* = {r.t[-1]:.4f}")
+            for sign in (1, -1):
+                ax.axhline(sign * limit, color=colour, ls=":", lw=0.8)
+            ax.set_ylabel(f"τ{i + 1}")
+    finish(fig, list(axes), f"{name}: min ½∫|τ/I|² + 100·T, free horizon, N = {steps}",
+           out / f"{name}.png")
+    print(f"wrote {out / f'{name}.png'}")
 
 
 if __name__ == "__main__":

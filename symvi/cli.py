@@ -85,6 +85,8 @@ def _solve(module, ex, steps: int, h: float) -> int:
           f"{result.iterations} Newton iterations")
     print(f"status     {result.status.name}: {result.message}")
     print(f"cost       {result.cost:.12g}")
+    if module.model.info.get("free_horizon"):
+        print(f"horizon    T = {result.t[-1]:.10g} (free; h = {result.t[1]:.6g})")
     if result.controls is not None:
         peak = np.abs(result.controls).max(axis=0)
         print(f"controls   max |u| per control = {np.array2string(peak, precision=6)}")

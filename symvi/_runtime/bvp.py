@@ -19,6 +19,7 @@ from . import arguments
 from .assembly import Problem
 from .band import cholesky_pivot, product
 from .gauge import check_boundary
+from .horizon import free_horizon
 from .interior import bounded
 from .globalisation import descent_step, line_search, natural_step
 from .optimality import second_order
@@ -73,6 +74,8 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
         other problems and the last steps by backtracking on ‖R‖₂. With inequalities
         (bounded controls) the solve is a primal–dual interior-point Newton
         (:mod:`.interior`, whose docstring states its SUCCESS rule); ``ftol`` is unused.
+    h : the step; with a free horizon (``optimal_control(..., time_cost=ρ)``) the first
+        guess of it, the result's ``t[-1]`` the optimal horizon (:mod:`.horizon`).
     raise_on_failure : raise :class:`NewtonError` (carrying the failed result and its
         iteration history) instead of returning a failed result.
     """
@@ -88,15 +91,27 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
     xtol, ftol = arguments.tolerance(xtol, "xtol"), arguments.tolerance(ftol, "ftol")
     maxiter = arguments.iterations(maxiter)
     check_memory(model, N)
+    if info.get("free_horizon"):
+        result = free_horizon(
+            lambda step, previous: _fixed_horizon(model, start, end, N, step, p, (
+                guess if previous is None else previous), maxiter, xtol, ftol),
+            model, p, N, h, xtol)
+    else:
+        result = _fixed_horizon(model, start, end, N, h, p, guess, maxiter, xtol, ftol)
+    return result.raise_for_status() if raise_on_failure else result
+
+
+def _fixed_horizon(model, start, end, N: int, h: float, p, guess, maxiter: int,
+                   xtol: float, ftol: float) -> BVPResult:
+    """The whole-trajectory solve at the step h: see :func:`solve_bvp`."""
     path = initial_path(model, start, end, N, guess, p, h)
     if isinstance(path, BVPResult):
-        return path.raise_for_status() if raise_on_failure else path
+        return path
     problem = Problem(model, p, h)
     if model.inequalities:
-        result = bounded(model, problem, path, maxiter, xtol,
-                         None if isinstance(guess, BVPResult) else _unbounded)
-        return result.raise_for_status() if raise_on_failure else result
-    if info.get("gauges"):
+        return bounded(model, problem, path, maxiter, xtol,
+                       None if isinstance(guess, BVPResult) else _unbounded)
+    if model.info.get("gauges"):
         check_boundary(model, path, problem.perturbed(path), p, h)
     path, norms, steps, status, message = _newton(problem, path, maxiter, xtol, ftol)
     if status == Status.SUCCESS and problem.minimise:
@@ -113,8 +128,7 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
     result = _result(model, path, p, h, dict(
         t=h * np.arange(N + 1), iterations=len(steps), residual_norms=np.array(norms),
         step_norms=np.array(steps), status=status, message=message))
-    result = _finite(result)
-    return result.raise_for_status() if raise_on_failure else result
+    return _finite(result)
 
 
 def _unbounded(problem: Problem, path: Path, maxiter: int, xtol: float):

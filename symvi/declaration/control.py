@@ -63,11 +63,14 @@ class ControlSystem:
     #: Named path inequalities g(q, y, u) ≤ 0, the coordinates' bounds among them
     #: (:mod:`symvi.declaration.inequalities`).
     path_inequalities: tuple[tuple[str, sp.Expr], ...] = ()
+    #: ρ of a free horizon (cost C + ρ·T over a horizon T to be optimised), an expression
+    #: in the parameters; None for a fixed horizon.
+    time_cost: sp.Expr | None = None
 
     def fingerprint(self) -> str:
         return ":".join([self.equations, sp.srepr(self.lagrangian), sp.srepr(self.cost),
                          sp.srepr(self.controls), repr(self.actuated), sp.srepr(self.bounds),
-                         sp.srepr(self.path_inequalities)])
+                         sp.srepr(self.path_inequalities), sp.srepr(self.time_cost)])
 
     def inequalities(self, controls: Sequence[sp.Expr], average) -> tuple[tuple[str, sp.Expr], ...]:
         """The named inequalities c ≤ 0 of one window, given its discrete controls and
@@ -122,6 +125,25 @@ def _control_symbols(controls, count: int) -> tuple[sp.Symbol, ...]:
     return symbols
 
 
+def _time_cost(value, parameters: Mapping[Any, float]) -> sp.Expr | None:
+    """ρ of a free horizon: an expression in the parameters, positive at their defaults
+    (with ρ ≤ 0 nothing stops the horizon from growing without end)."""
+    if value is None:
+        return None
+    rho = scalar(value, "time_cost")
+    defaults = {sp.Symbol(k, real=True) if isinstance(k, str) else k: float(v)
+                for k, v in parameters.items()}
+    unknown = rho.free_symbols - set(defaults)
+    if unknown:
+        raise ModelError(f"time_cost uses {sorted(map(str, unknown))}, which are not "
+                         f"parameters; ρ is a number or an expression in the parameters")
+    if not float(rho.xreplace(defaults)) > 0:
+        raise ModelError(f"time_cost ρ = {rho} is not positive (at the parameters' default "
+                         f"values): with no cost on T and no end condition fixing it, a free "
+                         f"horizon has no optimum")
+    return rho
+
+
 def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
                     controls: Sequence[Any] | str, actuated: Sequence[int] | None = None,
                     parameters: Mapping[Any, float] | None = None,
@@ -129,7 +151,8 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
                     description: str = "", equations: str = "paper",
                     symmetries: Sequence[Symmetry] = (),
                     bounds: Mapping[Any, tuple[Any, Any]] | None = None,
-                    inequalities: Sequence[Any] | Mapping[str, Any] = ()) -> Model:
+                    inequalities: Sequence[Any] | Mapping[str, Any] = (),
+                    time_cost: Any = None) -> Model:
     """The optimal-control problem min ∫ C(q, y, u) dt of a mechanical system on the
     algebroid of ``groupoid``, as a constrained second-order :class:`Model`.
 
@@ -167,6 +190,12 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
         the discrete controls u_k (:mod:`symvi.declaration.inequalities`); with any of
         them the whole-trajectory solve is a primal–dual interior-point Newton
         (:mod:`symvi._runtime.interior`).
+    time_cost:
+        ρ > 0 (a number or an expression in the parameters) makes the horizon T free:
+        the solve minimises J_d + ρ·T over the path and T = N·h, the ``h`` given to
+        ``solve_bvp`` being the first guess (:mod:`symvi._runtime.horizon`). Keep a
+        control cost in C: with C = 0 (pure minimum time) the optimality system is
+        singular; a small ε|u|² gives nearly bang–bang controls.
     """
     if equations not in EQUATIONS:
         raise ModelError(f"equations must be one of {EQUATIONS}, got {equations!r}")
@@ -189,6 +218,7 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
                          f"{name!r}; it is C(q, y, u) with controls {list(map(str, u))}")
     if not C.free_symbols & set(u):
         raise ModelError(f"the cost of {name!r} does not depend on the controls {list(map(str, u))}")
+    rho = _time_cost(time_cost, parameters)
     EL = euler_lagrange_operator(algebroid, L)
     forces = [EL[a] for a in directions]
     return Model(
@@ -198,4 +228,4 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
         constraints=[EL[A] for A in range(len(EL)) if A not in directions],
         controls=forces, symmetries=symmetries,
         control_system=ControlSystem(L, C, u, directions, equations, *declared(
-            bounds, inequalities, u, groupoid.continuous_symbols(1), parameters)))
+            bounds, inequalities, u, groupoid.continuous_symbols(1), parameters), rho))

@@ -279,6 +279,14 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
         kernels.append(Kernel("controls", window.z,
                               (("value", engine.window_values(window, 0, dm.controls)),),
                               "controls u at the window's quadrature point", window.definitions))
+    if dm.time_cost is not None:
+        parts = [engine.lagrangian(window, 0)] + list(engine.window_values(
+            window, 0, dm.window_constraints))
+        derivative = [_at_fixed_elements(dm, e, window.fs) for e in parts]
+        kernels.append(Kernel(
+            "horizon", window.z, (("value", sp.Matrix(derivative + [dm.time_cost])),),
+            "∂/∂h at fixed elements of L_d, Φ_d and c on one window, then ρ (a free "
+            "horizon: dJ/dT by the envelope theorem)", window.definitions))
     if dm.symmetries and not constrained:
         half = _stencil(dm, 2 * r - 1)
         kernels.append(Kernel("noether", half.z, (("value", noether_quantities(dm, engine, half)),),
@@ -473,15 +481,20 @@ def step_jacobian(dm: DiscreteModel) -> tuple[sp.Matrix, _Stencil]:
 
 
 def _energy(dm: DiscreteModel, Ld: sp.Expr, f: Sequence[sp.Symbol]) -> sp.Expr:
-    """E_d = −∂L_d/∂h at a fixed groupoid element (Kane, Marsden & Ortiz).
+    """E_d = −∂L_d/∂h at a fixed groupoid element (Kane, Marsden & Ortiz)."""
+    return -_at_fixed_elements(dm, Ld, [f])
 
-    Where fibre coordinates are scaled by h (ξ = τ⁻¹(w)/h on a Lie group), holding
-    the element fixed means holding h·ξ fixed.
-    """
+
+def _at_fixed_elements(dm: DiscreteModel, expr: sp.Expr, fibres) -> sp.Expr:
+    """∂expr/∂h with the groupoid elements of ``fibres`` (one tuple per element) held
+    fixed: where fibre coordinates are scaled by h (ξ = τ⁻¹(w)/h on a Lie group), that
+    means holding h·ξ fixed. Named base points count as fixed too (they are β of fixed
+    elements)."""
     eta = sp.Dummy("eta", positive=True)
-    scaled = {v: v * dm.step / eta for v, s in zip(f, dm.groupoid.step_scaled()) if s}
-    moved = Ld.xreplace({dm.step: eta} | scaled)
-    return -sp.diff(moved, eta).xreplace({eta: dm.step})
+    flags = dm.groupoid.step_scaled()
+    scaled = {v: v * dm.step / eta for f in fibres for v, s in zip(f, flags) if s}
+    moved = expr.xreplace({dm.step: eta} | scaled)
+    return sp.diff(moved, eta).xreplace({eta: dm.step})
 
 
 def _check_regular(dm: DiscreteModel, step: Kernel) -> None:

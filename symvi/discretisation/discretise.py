@@ -54,6 +54,8 @@ class DiscreteModel:
     inequalities: tuple[sp.Expr, ...] = ()
     inequality_names: tuple[str, ...] = ()
     inequality_multipliers: tuple[sp.Symbol, ...] = ()
+    #: ρ of a free horizon (cost + ρ·T), or None (:mod:`symvi.declaration.control`).
+    time_cost: sp.Expr | None = None
 
     @property
     def window_multipliers(self) -> tuple[sp.Symbol, ...]:
@@ -107,7 +109,8 @@ def discretise(model: "Model") -> DiscreteModel:
                          inequalities=tuple(c for _, c in named),
                          inequality_names=tuple(n for n, _ in named),
                          inequality_multipliers=tuple(sp.Dummy(f"z{a}", real=True)
-                                                      for a in range(len(named))))
+                                                      for a in range(len(named))),
+                         time_cost=None if system is None else system.time_cost)
 
 
 def node_variation(groupoid: Groupoid, lagrangian: sp.Expr, rule: Rule, xs, fs) -> sp.Matrix:

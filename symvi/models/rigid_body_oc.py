@@ -24,10 +24,10 @@ def quarter_turn() -> np.ndarray:
     return np.eye(3) + K + K @ K   # sin(π/2) = 1, 1 − cos(π/2) = 1
 
 
-def slew(name: str, retraction: str, description: str, **options):
+def slew(name: str, retraction: str, description: str, steps: int = N, **options):
     """The quarter-turn slew of a rigid body with inertia diag(1, 2, 3) as an
-    :func:`~symvi.optimal_control` problem (torques ``tau1…3``), with ``options`` (e.g.
-    bounds and their parameters) passed on."""
+    :func:`~symvi.optimal_control` problem (torques ``tau1…3``; example: T = 1 in
+    ``steps`` steps), with ``options`` (e.g. bounds and their parameters) passed on."""
     G = SO3(retraction=retraction)
     Omega = sp.Matrix(G.xi)
     I = sp.symbols("I1 I2 I3", positive=True)
@@ -40,7 +40,8 @@ def slew(name: str, retraction: str, description: str, **options):
         lagrangian=(Omega.T * sp.diag(*I) * Omega)[0] / 2,
         cost=sum((ui / Ii) ** 2 for ui, Ii in zip(u, I)) / 2, controls=u,
         parameters=parameters, bounds=bounds,
-        example=Example(h=T / N, n_steps=N, start=[np.eye(3)] * 2, end=[quarter_turn()] * 2),
+        example=Example(h=T / steps, n_steps=steps, start=[np.eye(3)] * 2,
+                        end=[quarter_turn()] * 2),
         description=f"{description}, {retraction} retraction", **options)
 
 

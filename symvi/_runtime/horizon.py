@@ -1,0 +1,102 @@
+"""A free final time: the horizon T = N·h that minimises J_d + ρ·T (issue 21).
+
+The whole-trajectory solve at a fixed h gives the optimal discrete cost J*(T). Its
+derivative needs no second solve: by the envelope theorem dJ*/dT = (1/N) ∂ℒ/∂h, the
+partial derivative of the Lagrangian ℒ = Σ_w [L_d + λ·Φ_d + z·c] at the optimal path
+and multipliers with the groupoid elements held fixed (the compiled ``horizon`` kernel:
+∂L_d/∂h, ∂Φ_d/∂h, ∂c/∂h per window, and ρ). The optimal horizon solves the scalar
+equation F'(T) = dJ*/dT + ρ = 0, by secant steps safeguarded by bisection once F' has
+changed sign, each inner solve warm-started from the last (its fibres rescaled to keep
+the elements); a trial horizon whose solve fails (too short for the bounds: no path
+meets them) is moved halfway back to the last solved one. SUCCESS needs every inner solve's SUCCESS and the secant's estimate of
+the distance to the root, |F'(T)| / |F''(T)|, within xtol·(1 + T).
+"""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from .results import BVPResult, Status
+
+#: Outer (horizon) iterations before MAX_ITERATIONS, and retries halfway back to the last
+#: solved horizon when a trial horizon's solve fails.
+MAX_HORIZON_STEPS, RETRIES = 40, 6
+
+
+def slope(model, result: BVPResult, p) -> float:
+    """F'(T) = dJ*/dT + ρ at a solved path (module docstring)."""
+    N = result.t.size - 1
+    h = float(result.t[1])
+    x = result.x if result.x is not None else np.zeros((N + 1, 0))
+    values = model.along_vector("horizon", x, result.f, h, p)
+    lam = result.multipliers if result.multipliers is not None else np.zeros((len(values), 0))
+    z = result.bound_multipliers if result.bound_multipliers is not None \
+        else np.zeros((len(values), 0))
+    weights = np.hstack([np.ones((len(values), 1)), lam, z])
+    derivative = float((values[:, :weights.shape[1]] * weights).sum())
+    return derivative / N + float(values[0, -1])
+
+
+def free_horizon(solve, model, p, N: int, h: float, xtol: float) -> BVPResult:
+    """Minimise J* + ρT over T from T = N·h. ``solve(h, guess)`` is the fixed-horizon
+    whole-trajectory solve (guess: a previous result or None)."""
+    T, result = N * h, solve(h, None)
+    if not result.success:
+        return _failed(result, T, "at the first horizon")
+    history = [(T, slope(model, result, p), result.cost)]
+    bracket = None
+    step = 0.1 * T
+    for _ in range(MAX_HORIZON_STEPS):
+        T_now, g_now, _ = history[-1]
+        if len(history) == 1:
+            T_next = T_now - np.sign(g_now) * step
+        else:
+            T_prev, g_prev, _ = history[-2]
+            curvature = (g_now - g_prev) / (T_now - T_prev)
+            T_next = T_now - g_now / curvature if curvature > 0 else T_now - np.sign(g_now) * step
+            if abs(T_now - T_prev) <= xtol * (1 + T_now) and curvature > 0 and abs(g_now / curvature) <= xtol * (1 + T_now):
+                return _converged(result, history, abs(g_now / curvature))
+        if bracket is not None:
+            low, high = bracket
+            if not low < T_next < high:
+                T_next = 0.5 * (low + high)
+        T_next = max(T_next, 0.5 * T_now)        # the horizon stays positive
+        trial = solve(T_next / N, result)
+        for _ in range(RETRIES):
+            if trial.success:
+                break
+            # a horizon too short for the bounds (or a solve that failed there): halfway
+            # back towards the last solved one
+            T_next = 0.5 * (T_next + T_now)
+            trial = solve(T_next / N, result)
+        if not trial.success:
+            return _failed(trial, T_next, f"at horizon T = {T_next:.6g}")
+        result = trial
+        history.append((T_next, slope(model, result, p), result.cost))
+        bracket = _bracket(history)
+        step *= 2.0
+    return replace(result, status=Status.MAX_ITERATIONS, message=(
+        f"the free horizon did not converge in {MAX_HORIZON_STEPS} steps (last T = "
+        f"{history[-1][0]:.10g}, dJ/dT + ρ = {history[-1][1]:.2e}); {result.message}"))
+
+
+def _bracket(history) -> tuple[float, float] | None:
+    """The tightest (T_low, T_high) around the root of F' among the horizons tried."""
+    below = [T for T, g, _ in history if g < 0]
+    above = [T for T, g, _ in history if g > 0]
+    if not below or not above:
+        return None
+    return max(below), min(above)
+
+
+def _converged(result: BVPResult, history, distance: float) -> BVPResult:
+    T, g, _ = history[-1]
+    return replace(result, message=(
+        f"free horizon T = {T:.12g} after {len(history)} solves (dJ/dT + ρ = {g:.2e}, "
+        f"estimated distance to the optimal T {distance:.1e}); last solve: "
+        f"{result.message}"))
+
+
+def _failed(result: BVPResult, T: float, where: str) -> BVPResult:
+    return replace(result, message=f"free horizon: the solve {where} failed: {result.message}")

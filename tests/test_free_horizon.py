@@ -1,0 +1,74 @@
+"""A free final time (issue 21): ``optimal_control(..., time_cost=ρ)`` minimises J_d + ρ·T.
+
+The bundled ``minimum_time_slew`` is ``spacecraft_slew`` (same cost, same torque limits)
+with its horizon free. Checked here with the fixed-horizon model as the independent
+reference: at the returned T*, the fixed-horizon optimum at h = T*/N has the same cost,
+and F(T) = J*(T) + ρT, sampled with fixed-horizon solves around T*, is smallest at T*
+(a parabola through the samples puts its vertex there). The optimal T falls as the
+torque limit rises, and converges as N grows (order reported).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import sympy as sp
+
+from symvi import SO3, ModelError, optimal_control
+from symvi.models import get
+
+RHO = 100.0
+
+
+@pytest.fixture(scope="module")
+def modules(compiled):
+    return compiled("minimum_time_slew"), compiled("spacecraft_slew")
+
+
+def _solve(mod, N, T, **params):
+    ex = get("spacecraft_slew").example
+    r = mod.solve_bvp(ex.start, ex.end, N, T / N, params=params)
+    assert r.success, r.message
+    return r
+
+
+def test_optimal_horizon_minimises_cost_plus_time(modules):
+    free, fixed = modules
+    N = 100
+    r = _solve(free, N, 1.0)
+    T = float(r.t[-1])
+    same = _solve(fixed, N, T)
+    assert abs(same.cost - r.cost) <= 1e-9 * r.cost
+    offsets = np.array([-2e-4, -1e-4, 0.0, 1e-4, 2e-4])
+    F = np.array([_solve(fixed, N, T + d, tau_max=11.0).cost + RHO * (T + d) for d in offsets])
+    vertex = -np.polyfit(offsets, F, 2)[1] / (2 * np.polyfit(offsets, F, 2)[0])
+    print(f"\nT* = {T:.10f}; F around it {F - F[2]}; parabola vertex at T* {vertex:+.1e}")
+    assert F[2] <= F.min() + 1e-12 * F[2]
+    assert abs(vertex) <= 1e-6
+
+
+def test_horizon_falls_as_the_limit_rises_and_converges_in_N(modules):
+    free, _ = modules
+    horizons = [float(_solve(free, 100, 1.0, tau_max=t).t[-1]) for t in (10.0, 11.0, 13.0, 16.0)]
+    print(f"\nT*(τ_max = 10, 11, 13, 16) = {np.round(horizons, 8)}")
+    assert np.all(np.diff(horizons) < 0)
+    sizes = (50, 100, 200, 400)
+    T = np.array([float(_solve(free, N, 1.0).t[-1]) for N in sizes])
+    differences = np.abs(np.diff(T))
+    order = np.log2(differences[:-1] / differences[1:])
+    print(f"T*(N = {sizes}) = {T}; successive differences {differences}; observed order "
+          f"{order}")
+    assert np.all(differences[1:] < differences[:-1])
+    assert np.all(order > 0.8)
+
+
+@pytest.mark.parametrize("rho, pattern", [
+    (0.0, "time_cost ρ = 0.0 is not positive"),
+    (sp.Symbol("c"), r"time_cost uses \['c'\]"),
+])
+def test_a_free_horizon_needs_a_positive_time_cost(rho, pattern):
+    G = SO3()
+    u = sp.symbols("tau1 tau2 tau3", real=True)
+    Omega = sp.Matrix(G.xi)
+    with pytest.raises(ModelError, match=pattern):
+        optimal_control("bad", G, (Omega.T * Omega)[0] / 2, sum(v**2 for v in u) / 2, u,
+                        time_cost=rho)
