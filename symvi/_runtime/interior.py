@@ -58,6 +58,7 @@ class InteriorPoint:
         self.nodes = ~self.rows
         self.mu, self.floor = MU_START, MU_FLOOR * xtol
         self.corrections: list[float] = []     # the KKT corrections, one per iteration
+        self.best = (np.inf, path, None)        # (correction, path, slacks) of the best
         self.history: dict[str, list] = {k: [] for k in (
             "mu", "primal", "dual", "complementarity", "alpha")}
         self.inequalities.evaluate(path, problem.p, problem.h)
@@ -175,6 +176,8 @@ class InteriorPoint:
             error = self._barrier_error(delta, dz, path)
             correction = self.kkt_correction(ab, bw, res, path)
             self.corrections.append(max(error, correction))
+            if max(error, correction) < self.best[0]:
+                self.best = (max(error, correction), path, self.s.copy())
             if max(error, correction) <= tolerance:
                 return path, Status.SUCCESS, (
                     f"; Newton correction of the KKT system (μ = 0) {correction:.1e} "
@@ -193,12 +196,15 @@ class InteriorPoint:
             self.mu, self.corrections = mu, []      # stagnation is judged per barrier stage
         stagnant = self._stagnant(tolerance)
         if stagnant is not None:
+            # the most accurate path met, with its own correction as its error estimate
+            best, path, self.s = self.best
             return path, Status.ILL_CONDITIONED, (
-                f"the Newton correction of the KKT system stopped decreasing at about "
-                f"{stagnant:.1e} > the tolerance xtol·(1 + size) = {tolerance:.1e} (barrier "
-                f"parameter {self.mu:.1e}, {self._last_errors()}): rounding amplified by "
-                f"the barrier system's conditioning (Σ = z/s grows as the bounds become "
-                f"active) limits the attainable accuracy to about {stagnant:.0e}; accept it "
+                f"the Newton correction of the KKT system stopped decreasing, between "
+                f"{min(self.corrections):.1e} and {stagnant:.1e}, above the tolerance "
+                f"xtol·(1 + size) = {tolerance:.1e} (barrier parameter {self.mu:.1e}): "
+                f"rounding amplified by the barrier system's conditioning (Σ = z/s grows as "
+                f"the bounds become active) limits the attainable accuracy; the path "
+                f"returned is the most accurate met, its correction {best:.1e}. Accept it "
                 f"with a larger xtol, or use fewer steps")
         moved = self._step(path, res, ab, bw, delta, ds, dz, Gd, error)
         if moved is None:
