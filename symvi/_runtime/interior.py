@@ -4,31 +4,32 @@ inequalities (issue 21).
 Newton's method on the perturbed KKT system of min S = Σ L_d subject to Φ_d = 0 and
 c ≤ 0 on every window (:mod:`.barrier`), with the slack and multiplier steps eliminated
 per window so that each iteration solves the equality solver's band. The barrier
-parameter falls monotonically (IPOPT's rule, :func:`.barrier.next_barrier`) once the
-barrier problem is solved to its own accuracy; steps keep s, z > 0 by the
-fraction-to-the-boundary rule and are globalised by Armijo backtracking on the ℓ1
-exact penalty of the barrier problem, S − μh Σ log s + ν(‖Φ_d‖₁ + ‖c + s‖₁), with the
-equality solver's inertia correction of the node block (:mod:`.globalisation`).
+parameter falls by IPOPT's monotone rule (:func:`.barrier.next_barrier`) once the
+barrier problem is solved to its own accuracy, and only while its bias exceeds the
+tolerance; steps keep s, z > 0 by the fraction-to-the-boundary rule and are globalised
+as :mod:`.interior_steps` describes.
 
 μ is measured per unit time: the barrier term of a window is μh log s, as the cost's
 is h L̃, so one schedule fits every N.
 
 SUCCESS needs the full Newton correction of the unperturbed KKT system (μ = 0, the
-true optimality conditions with s_j z_j = 0) at the returned path — in every unknown:
-node corrections, multipliers λ and z, slacks — within xtol·(1 + size), and a minimum
-(the reduced Hessian of the Lagrangian positive definite, as for the equality solver).
-Where that system is non-singular (strict complementarity, independent active
-constraints, second-order sufficiency) the correction is the first-order estimate of the
-distance to the KKT point, the same bound the equality solver's rule uses.
+true optimality conditions with s_j z_j = 0) at the returned path — in the node
+corrections and the multipliers λ and z — within xtol·(1 + size), and a minimum (the
+Hessian of the Lagrangian positive definite on the tangent space of the equalities and
+the active bounds: :meth:`InteriorPoint.minimum`). Where that system is non-singular
+(strict complementarity, independent active constraints, second-order sufficiency) the
+correction is the first-order estimate of the distance to the KKT point, the same bound
+the equality solver's rule uses. Where rounding stalls the corrections above the
+tolerance the solve is ILL_CONDITIONED, returning the most accurate path met.
 """
 from __future__ import annotations
 
 import numpy as np
 
-from .barrier import (TAU_MIN, Inequalities, boundary_step, next_barrier, safeguarded)
-from .globalisation import curvature
-from .optimality import second_order
 from .band import cholesky_pivot
+from .barrier import Inequalities, next_barrier
+from .interior_steps import step
+from .optimality import second_order
 from .paths import Path
 from .results import BVPResult, Status
 
@@ -39,10 +40,6 @@ MU_START, MU_FLOOR = 0.1, 1e-3
 KAPPA_EPSILON = 10.0
 #: Iterations over which the KKT correction must halve to count as still converging.
 STAGNATION = 6
-#: Relative size of a correction below which a full step whose merit decrease is rounding
-#: may be taken by the natural monotonicity test instead (:meth:`InteriorPoint._natural`).
-NEAR = 1e-6
-
 
 class InteriorPoint:
     """The interior-point iteration on one :class:`.assembly.Problem` and path."""
@@ -105,9 +102,6 @@ class InteriorPoint:
         free = (self.blocks >= r) & (self.blocks < self.inequalities.n_nodes - r)
         out[~free] = 0.0
         return out.reshape(-1)
-
-    def size(self, path: Path) -> float:
-        return max(self.problem.size(path), float(self.s.max(initial=0.0)))
 
     def kkt_correction(self, ab, bw: int, res: np.ndarray, path: Path) -> float:
         """‖(Δη, Δλ, Δz)‖∞ of the full Newton correction of the unperturbed KKT system
@@ -206,7 +200,7 @@ class InteriorPoint:
                 f"the bounds become active) limits the attainable accuracy; the path "
                 f"returned is the most accurate met, its correction {best:.1e}. Accept it "
                 f"with a larger xtol, or use fewer steps")
-        moved = self._step(path, res, ab, bw, delta, ds, dz, Gd, error)
+        moved = step(self, path, res, ab, bw, delta, ds, dz, Gd, error)
         if moved is None:
             return path, Status.STALLED, (
                 f"the interior-point line search stalled at iteration {it} (barrier "
@@ -298,149 +292,6 @@ class InteriorPoint:
             kind=model.info["kind"], bound_multipliers=z, active=z > self.s,
             inequalities=self.inequalities.names,
             history={k: np.array(v) for k, v in self.history.items()})
-
-    # -- globalisation -------------------------------------------------------------------
-    def merit(self, path: Path, s: np.ndarray, nu: float) -> float:
-        """The barrier problem's ℓ1 exact penalty S − μh Σ log s + ν(‖Φ_d‖₁ + ‖c + s‖₁)."""
-        problem = self.problem
-        if not self.inequalities.evaluate(path, problem.p, problem.h):
-            return np.inf
-        value = problem.merit(path)[0] - self.mu * problem.h * float(np.log(s).sum()) \
-            + nu * float(np.abs(self.inequalities.values + s).sum())
-        if self.rows.any():
-            res, _, _, finite = problem.assemble(path, False)
-            value = value + nu * float(np.abs(res[self.rows]).sum()) if finite else np.inf
-        return value
-
-    def _step(self, path: Path, res, ab, bw: int, delta, ds, dz, Gd, error: float):
-        """A step along the reduced correction (shifted where it is no descent or meets
-        negative curvature, as in :func:`.globalisation.descent_step`), cut by the
-        fraction-to-the-boundary rule and Armijo backtracking on :meth:`merit`; near
-        the solution, where the merit's rounding hides the step's decrease, the full
-        step by Deuflhard's natural monotonicity test (:meth:`_natural`). The moved
-        path, or None."""
-        from scipy.linalg import LinAlgError
-
-        problem, mu = self.problem, self.mu * self.problem.h
-        c, nodes = self.inequalities.values.copy(), self.nodes
-        scale = self.scale
-        # the curvature test, not the inertia of a Cholesky factorisation: near the end
-        # Σ's entries exceed W's by 10¹⁰ and more, and that factorisation fails by rounding
-        shift = problem.shift
-        while shift <= 1e3:
-            if shift > 0.0:
-                try:
-                    delta = problem.solve(ab, bw, -res, shift * scale, nodes)
-                except LinAlgError:
-                    shift = max(10 * shift, 1e-8)
-                    continue
-                ds, dz, Gd = self.steps(delta, path, mu, c)
-            moved = self._backtrack(path, ab, bw, delta, ds, dz, Gd, c, shift * scale)
-            if moved is None and shift == 0.0:
-                moved = self._natural(path, ab, bw, delta, ds, dz, error) \
-                    if error <= NEAR * (1.0 + problem.size(path)) \
-                    else self._residual_search(path, delta, ds, dz, c)
-            if moved is not None:
-                problem.shift = shift / 10 if shift > 1e-10 else 0.0
-                return moved
-            shift = max(10 * shift, 1e-8)
-        return None
-
-    def _backtrack(self, path: Path, ab, bw: int, delta, ds, dz, Gd, c, shift: float):
-        """Armijo backtracking on :meth:`merit` from the fraction-to-the-boundary step,
-        if ``delta`` is a descent direction with positive curvature; else None."""
-        problem, mu = self.problem, self.mu * self.problem.h
-        rows, nodes = self.rows, self.nodes
-        z, s = self.z(path).copy(), self.s
-        lam, phi_d = problem.multipliers(path), self.stencil[rows]
-        infeasibility = float(np.abs(phi_d).sum() + np.abs(c + s).sum())
-        # ν ≥ 1.5 max |multiplier| after the step, by Powell's rule as in descent_step
-        wanted = 1.5 * max(float(np.abs(lam + delta[rows]).max(initial=0.0)),
-                           float(np.abs(z + dz).max(initial=0.0)))
-        nu = problem.penalty = max(wanted, 0.5 * (problem.penalty + wanted))
-        descent = float(self.stencil[nodes] @ delta[nodes] + lam @ phi_d - (z * Gd).sum()) \
-            - mu * float((ds / s).sum()) - nu * infeasibility
-        cost, noise = problem.merit(path)
-        if curvature(self.model, ab, bw, delta, nodes, shift) <= 0 or descent >= 0:
-            return None
-        if -descent <= noise * (1 + nu):
-            return None
-        base = cost - mu * float(np.log(s).sum()) + nu * infeasibility
-        tau = max(TAU_MIN, 1.0 - self.mu)
-        alpha = boundary_step(s, ds, tau)
-        while alpha >= 2.0**-20:
-            trial = problem.moved(path, delta, alpha)
-            if trial is not None and \
-                    self.merit(trial, s + alpha * ds, nu) <= base + 1e-4 * alpha * descent:
-                return self._accept(trial, s + alpha * ds, z, dz, boundary_step(z, dz, tau),
-                                    alpha)
-            alpha /= 2
-        return None
-
-    def _kkt_norm(self, path: Path, s: np.ndarray, c: np.ndarray | None = None) -> float:
-        """‖(∇ℒ, Φ_d, c + s, s∘z − μh)‖₂ of the barrier problem's KKT system at ``path``
-        (its multipliers z in ``path``), c evaluated unless given."""
-        from scipy.linalg.blas import dnrm2
-
-        problem = self.problem
-        res, _, _, finite = problem.assemble(path, False)
-        if c is None:
-            finite = finite and self.inequalities.evaluate(path, problem.p, problem.h)
-            c = self.inequalities.values
-        if not finite:
-            return np.inf
-        parts = (res, (c + s).ravel(), (s * self.z(path) - self.mu * problem.h).ravel())
-        return float(np.sqrt(sum(float(dnrm2(v)) ** 2 for v in parts)))
-
-    def _residual_search(self, path: Path, delta, ds, dz, c):
-        """Backtracking on the KKT residual's norm from the fraction-to-the-boundary step,
-        when the merit rejects a Newton step for the second-order growth of ν‖Φ_d‖₁ (the
-        Maratos effect: the cart-pole's swing-up, started at the optimum without bounds,
-        stalled at its first step); the equality solver falls back the same way
-        (:func:`.globalisation.line_search`). The moved path, or None."""
-        tau = max(TAU_MIN, 1.0 - self.mu)
-        z = self.z(path).copy()
-        base = self._kkt_norm(path, self.s, c)
-        alpha, alpha_z = boundary_step(self.s, ds, tau), boundary_step(z, dz, tau)
-        while alpha >= 2.0**-12:
-            trial = self.problem.moved(path, delta, alpha)
-            if trial is not None:
-                s = self.s + alpha * ds
-                trial.lam[:, self.s_count:] = z + min(alpha, alpha_z) * dz
-                if self._kkt_norm(trial, s) <= np.sqrt(1 - 1e-4 * alpha) * base:
-                    return self._accept(trial, s, z, dz, min(alpha, alpha_z), alpha)
-            alpha /= 2
-        return None
-
-    def _natural(self, path: Path, ab, bw: int, delta, ds, dz, error: float):
-        """The full step (to the boundary) if the correction the same reduced matrix gives
-        at the moved path is smaller than ``error``, the one it makes: Deuflhard's natural
-        monotonicity test, which needs no merit function. Else None."""
-        problem, h = self.problem, self.problem.h
-        tau = max(TAU_MIN, 1.0 - self.mu)
-        alpha, z = boundary_step(self.s, ds, tau), self.z(path).copy()
-        trial = problem.moved(path, delta, alpha)
-        if trial is None:
-            return None
-        s = self.s + alpha * ds
-        trial.lam[:, self.s_count:] = safeguarded(z + boundary_step(z, dz, tau) * dz, s, self.mu * h)
-        res, _, _, finite = problem.assemble(trial, False)
-        finite = finite and self.inequalities.add_barrier(
-            trial, problem.p, h, self.z(trial), s, self.mu * h, res, None)
-        if not finite:
-            return None
-        simplified = problem.solve(ab, bw, -res)
-        if not float(np.abs(simplified).max(initial=0.0)) < error:
-            return None
-        self.s = s
-        self.history["alpha"].append(alpha)
-        return trial
-
-    def _accept(self, trial: Path, s: np.ndarray, z, dz, alpha_z: float, alpha: float) -> Path:
-        self.s = s
-        trial.lam[:, self.s_count:] = safeguarded(z + alpha_z * dz, s, self.mu * self.problem.h)
-        self.history["alpha"].append(alpha)
-        return trial
 
 
 def bounded(model, problem, path: Path, maxiter: int, xtol: float,

@@ -1,0 +1,165 @@
+"""Steps of the interior-point iteration (:mod:`.interior`): the barrier problem's merit,
+and how a step along the reduced Newton correction is found and taken.
+
+Armijo backtracking on the ℓ1 exact penalty of the barrier problem,
+S − μh Σ log s + ν(‖Φ_d‖₁ + ‖c + s‖₁), from the fraction-to-the-boundary step, with the
+curvature test of :func:`.globalisation.descent_step` shifting the node block where the
+step meets negative curvature; backtracking on the KKT residual's norm where the merit
+rejects a Newton step (the Maratos effect); Deuflhard's natural monotonicity test near
+the solution, where the merit's rounding hides the decrease. Each takes the
+:class:`.interior.InteriorPoint` ``ip`` and returns the moved path or None.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .barrier import TAU_MIN, boundary_step, safeguarded
+from .globalisation import curvature
+from .paths import Path
+
+#: Relative size of a correction below which a full step whose merit decrease is rounding
+#: may be taken by the natural monotonicity test instead (:func:`_natural`).
+NEAR = 1e-6
+
+
+def merit(ip, path: Path, s: np.ndarray, nu: float) -> float:
+    """The barrier problem's ℓ1 exact penalty S − μh Σ log s + ν(‖Φ_d‖₁ + ‖c + s‖₁)."""
+    problem = ip.problem
+    if not ip.inequalities.evaluate(path, problem.p, problem.h):
+        return np.inf
+    value = problem.merit(path)[0] - ip.mu * problem.h * float(np.log(s).sum()) \
+        + nu * float(np.abs(ip.inequalities.values + s).sum())
+    if ip.rows.any():
+        res, _, _, finite = problem.assemble(path, False)
+        value = value + nu * float(np.abs(res[ip.rows]).sum()) if finite else np.inf
+    return value
+
+def step(ip, path: Path, res, ab, bw: int, delta, ds, dz, Gd, error: float):
+    """A step along the reduced correction (shifted where it is no descent or meets
+    negative curvature, as in :func:`.globalisation.descent_step`), cut by the
+    fraction-to-the-boundary rule and Armijo backtracking on :meth:`merit`; near
+    the solution, where the merit's rounding hides the step's decrease, the full
+    step by Deuflhard's natural monotonicity test (:meth:`_natural`). The moved
+    path, or None."""
+    from scipy.linalg import LinAlgError
+
+    problem, mu = ip.problem, ip.mu * ip.problem.h
+    c, nodes = ip.inequalities.values.copy(), ip.nodes
+    scale = ip.scale
+    # the curvature test, not the inertia of a Cholesky factorisation: near the end
+    # Σ's entries exceed W's by 10¹⁰ and more, and that factorisation fails by rounding
+    shift = problem.shift
+    while shift <= 1e3:
+        if shift > 0.0:
+            try:
+                delta = problem.solve(ab, bw, -res, shift * scale, nodes)
+            except LinAlgError:
+                shift = max(10 * shift, 1e-8)
+                continue
+            ds, dz, Gd = ip.steps(delta, path, mu, c)
+        moved = _backtrack(ip, path, ab, bw, delta, ds, dz, Gd, c, shift * scale)
+        if moved is None and shift == 0.0:
+            moved = _natural(ip, path, ab, bw, delta, ds, dz, error) \
+                if error <= NEAR * (1.0 + problem.size(path)) \
+                else _residual_search(ip, path, delta, ds, dz, c)
+        if moved is not None:
+            problem.shift = shift / 10 if shift > 1e-10 else 0.0
+            return moved
+        shift = max(10 * shift, 1e-8)
+    return None
+
+def _backtrack(ip, path: Path, ab, bw: int, delta, ds, dz, Gd, c, shift: float):
+    """Armijo backtracking on :meth:`merit` from the fraction-to-the-boundary step,
+    if ``delta`` is a descent direction with positive curvature; else None."""
+    problem, mu = ip.problem, ip.mu * ip.problem.h
+    rows, nodes = ip.rows, ip.nodes
+    z, s = ip.z(path).copy(), ip.s
+    lam, phi_d = problem.multipliers(path), ip.stencil[rows]
+    infeasibility = float(np.abs(phi_d).sum() + np.abs(c + s).sum())
+    # ν ≥ 1.5 max |multiplier| after the step, by Powell's rule as in descent_step
+    wanted = 1.5 * max(float(np.abs(lam + delta[rows]).max(initial=0.0)),
+                       float(np.abs(z + dz).max(initial=0.0)))
+    nu = problem.penalty = max(wanted, 0.5 * (problem.penalty + wanted))
+    descent = float(ip.stencil[nodes] @ delta[nodes] + lam @ phi_d - (z * Gd).sum()) \
+        - mu * float((ds / s).sum()) - nu * infeasibility
+    cost, noise = problem.merit(path)
+    if curvature(ip.model, ab, bw, delta, nodes, shift) <= 0 or descent >= 0:
+        return None
+    if -descent <= noise * (1 + nu):
+        return None
+    base = cost - mu * float(np.log(s).sum()) + nu * infeasibility
+    tau = max(TAU_MIN, 1.0 - ip.mu)
+    alpha = boundary_step(s, ds, tau)
+    while alpha >= 2.0**-20:
+        trial = problem.moved(path, delta, alpha)
+        if trial is not None and \
+                merit(ip, trial, s + alpha * ds, nu) <= base + 1e-4 * alpha * descent:
+            return _accept(ip, trial, s + alpha * ds, z, dz, boundary_step(z, dz, tau),
+                                alpha)
+        alpha /= 2
+    return None
+
+def _kkt_norm(ip, path: Path, s: np.ndarray, c: np.ndarray | None = None) -> float:
+    """‖(∇ℒ, Φ_d, c + s, s∘z − μh)‖₂ of the barrier problem's KKT system at ``path``
+    (its multipliers z in ``path``), c evaluated unless given."""
+    from scipy.linalg.blas import dnrm2
+
+    problem = ip.problem
+    res, _, _, finite = problem.assemble(path, False)
+    if c is None:
+        finite = finite and ip.inequalities.evaluate(path, problem.p, problem.h)
+        c = ip.inequalities.values
+    if not finite:
+        return np.inf
+    parts = (res, (c + s).ravel(), (s * ip.z(path) - ip.mu * problem.h).ravel())
+    return float(np.sqrt(sum(float(dnrm2(v)) ** 2 for v in parts)))
+
+def _residual_search(ip, path: Path, delta, ds, dz, c):
+    """Backtracking on the KKT residual's norm from the fraction-to-the-boundary step,
+    when the merit rejects a Newton step for the second-order growth of ν‖Φ_d‖₁ (the
+    Maratos effect: the cart-pole's swing-up, started at the optimum without bounds,
+    stalled at its first step); the equality solver falls back the same way
+    (:func:`.globalisation.line_search`). The moved path, or None."""
+    tau = max(TAU_MIN, 1.0 - ip.mu)
+    z = ip.z(path).copy()
+    base = _kkt_norm(ip, path, ip.s, c)
+    alpha, alpha_z = boundary_step(ip.s, ds, tau), boundary_step(z, dz, tau)
+    while alpha >= 2.0**-12:
+        trial = ip.problem.moved(path, delta, alpha)
+        if trial is not None:
+            s = ip.s + alpha * ds
+            trial.lam[:, ip.s_count:] = z + min(alpha, alpha_z) * dz
+            if _kkt_norm(ip, trial, s) <= np.sqrt(1 - 1e-4 * alpha) * base:
+                return _accept(ip, trial, s, z, dz, min(alpha, alpha_z), alpha)
+        alpha /= 2
+    return None
+
+def _natural(ip, path: Path, ab, bw: int, delta, ds, dz, error: float):
+    """The full step (to the boundary) if the correction the same reduced matrix gives
+    at the moved path is smaller than ``error``, the one it makes: Deuflhard's natural
+    monotonicity test, which needs no merit function. Else None."""
+    problem, h = ip.problem, ip.problem.h
+    tau = max(TAU_MIN, 1.0 - ip.mu)
+    alpha, z = boundary_step(ip.s, ds, tau), ip.z(path).copy()
+    trial = problem.moved(path, delta, alpha)
+    if trial is None:
+        return None
+    s = ip.s + alpha * ds
+    trial.lam[:, ip.s_count:] = safeguarded(z + boundary_step(z, dz, tau) * dz, s, ip.mu * h)
+    res, _, _, finite = problem.assemble(trial, False)
+    finite = finite and ip.inequalities.add_barrier(
+        trial, problem.p, h, ip.z(trial), s, ip.mu * h, res, None)
+    if not finite:
+        return None
+    simplified = problem.solve(ab, bw, -res)
+    if not float(np.abs(simplified).max(initial=0.0)) < error:
+        return None
+    ip.s = s
+    ip.history["alpha"].append(alpha)
+    return trial
+
+def _accept(ip, trial: Path, s: np.ndarray, z, dz, alpha_z: float, alpha: float) -> Path:
+    ip.s = s
+    trial.lam[:, ip.s_count:] = safeguarded(z + alpha_z * dz, s, ip.mu * ip.problem.h)
+    ip.history["alpha"].append(alpha)
+    return trial
