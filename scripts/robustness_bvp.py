@@ -1,5 +1,5 @@
 """The robustness battery of the whole-trajectory solve, on every bundled optimal-control
-problem (issue 20, item 3).
+problem, bounded ones included (issue 20, item 3; issue 21).
 
 For each problem at N = 100 and N = 1000 (the example's horizon): the chord guess, the
 zero guess (every free node at the last start node) and 20 seeded smooth random
@@ -23,7 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent.parent / "tests"))
 
 import battery  # noqa: E402
 from symvi.build import compile_model  # noqa: E402
-from symvi.models import CONTROL, get  # noqa: E402
+from symvi.models import BOUNDED, CONTROL, get  # noqa: E402
 
 SIZES = (100, 1000)
 
@@ -43,7 +43,7 @@ def report(name: str, N: int, module) -> float:
 
 
 def main(names: list[str]) -> None:
-    for name in names or CONTROL:
+    for name in names or CONTROL + BOUNDED:
         module = compile_model(get(name), Path(__file__).resolve().parent.parent / "generated")
         for N in SIZES:
             report(name, N, module)
