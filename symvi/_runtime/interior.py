@@ -41,6 +41,7 @@ KAPPA_EPSILON = 10.0
 #: Iterations over which the KKT correction must halve to count as still converging.
 STAGNATION = 6
 
+
 class InteriorPoint:
     """The interior-point iteration on one :class:`.assembly.Problem` and path."""
 
@@ -68,8 +69,9 @@ class InteriorPoint:
 
     # -- the linear algebra of one iteration ---------------------------------------------
     def system(self, path: Path):
-        """Assemble and factorise the reduced system at ``path``: (res, ab, bw, stencil
-        residual norms) or None where something is not finite."""
+        """Assemble the reduced system at ``path``: (res, ab, bw, and the stencil
+        residual's norms on the node and constraint rows), or None where something is
+        not finite."""
         p, h = self.problem.p, self.problem.h
         res, ab, bw, finite = self.problem.assemble(path, True)
         dual = float(np.abs(res[self.nodes]).max(initial=0.0))
@@ -124,12 +126,12 @@ class InteriorPoint:
                     f"singular Newton matrix at interior-point iteration {it} ({exc})")
             if status is not None:
                 return (path, it + (status is not Status.SUCCESS),
-                        *self._infeasible(path, status, message))
-        return path, maxiter, *self._infeasible(path, Status.MAX_ITERATIONS, (
+                        *self._with_infeasibility(path, status, message))
+        return path, maxiter, *self._with_infeasibility(path, Status.MAX_ITERATIONS, (
             f"the interior-point method did not converge in {maxiter} iterations "
             f"(barrier parameter {self.mu:.1e}, {self._last_errors()})"))
 
-    def _infeasible(self, path: Path, status: Status, message: str) -> tuple[Status, str]:
+    def _with_infeasibility(self, path: Path, status: Status, message: str) -> tuple[Status, str]:
         """A stalled or exhausted solve whose primal infeasibility stopped decreasing
         (less than 10 % over the last ten iterations) above 10⁻³ of the inequalities'
         scale: the message names the worst violated inequality and its window. The

@@ -34,12 +34,13 @@ def merit(ip, path: Path, s: np.ndarray, nu: float) -> float:
         value = value + nu * float(np.abs(res[ip.rows]).sum()) if finite else np.inf
     return value
 
+
 def step(ip, path: Path, res, ab, bw: int, delta, ds, dz, Gd, error: float):
     """A step along the reduced correction (shifted where it is no descent or meets
     negative curvature, as in :func:`.globalisation.descent_step`), cut by the
-    fraction-to-the-boundary rule and Armijo backtracking on :meth:`merit`; near
+    fraction-to-the-boundary rule and Armijo backtracking on :func:`merit`; near
     the solution, where the merit's rounding hides the step's decrease, the full
-    step by Deuflhard's natural monotonicity test (:meth:`_natural`). The moved
+    step by Deuflhard's natural monotonicity test (:func:`_natural`). The moved
     path, or None."""
     from scipy.linalg import LinAlgError
 
@@ -68,8 +69,9 @@ def step(ip, path: Path, res, ab, bw: int, delta, ds, dz, Gd, error: float):
         shift = max(10 * shift, 1e-8)
     return None
 
+
 def _backtrack(ip, path: Path, ab, bw: int, delta, ds, dz, Gd, c, shift: float):
-    """Armijo backtracking on :meth:`merit` from the fraction-to-the-boundary step,
+    """Armijo backtracking on :func:`merit` from the fraction-to-the-boundary step,
     if ``delta`` is a descent direction with positive curvature; else None."""
     problem, mu = ip.problem, ip.mu * ip.problem.h
     rows, nodes = ip.rows, ip.nodes
@@ -99,6 +101,7 @@ def _backtrack(ip, path: Path, ab, bw: int, delta, ds, dz, Gd, c, shift: float):
         alpha /= 2
     return None
 
+
 def _kkt_norm(ip, path: Path, s: np.ndarray, c: np.ndarray | None = None) -> float:
     """‖(∇ℒ, Φ_d, c + s, s∘z − μh)‖₂ of the barrier problem's KKT system at ``path``
     (its multipliers z in ``path``), c evaluated unless given."""
@@ -113,6 +116,7 @@ def _kkt_norm(ip, path: Path, s: np.ndarray, c: np.ndarray | None = None) -> flo
         return np.inf
     parts = (res, (c + s).ravel(), (s * ip.z(path) - ip.mu * problem.h).ravel())
     return float(np.sqrt(sum(float(dnrm2(v)) ** 2 for v in parts)))
+
 
 def _residual_search(ip, path: Path, delta, ds, dz, c):
     """Backtracking on the KKT residual's norm from the fraction-to-the-boundary step,
@@ -133,6 +137,7 @@ def _residual_search(ip, path: Path, delta, ds, dz, c):
                 return _accept(ip, trial, s, z, dz, min(alpha, alpha_z), alpha)
         alpha /= 2
     return None
+
 
 def _natural(ip, path: Path, ab, bw: int, delta, ds, dz, error: float):
     """The full step (to the boundary) if the correction the same reduced matrix gives
@@ -157,6 +162,7 @@ def _natural(ip, path: Path, ab, bw: int, delta, ds, dz, error: float):
     ip.s = s
     ip.history["alpha"].append(alpha)
     return trial
+
 
 def _accept(ip, trial: Path, s: np.ndarray, z, dz, alpha_z: float, alpha: float) -> Path:
     ip.s = s
