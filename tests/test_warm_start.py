@@ -72,3 +72,23 @@ def test_a_previous_result_at_another_step_keeps_its_elements(compiled):
     W = warm.g[:-1].transpose(0, 2, 1) @ warm.g[1:]
     xi = np.array([vee(cay_inv(w)) for w in W]) / (1.2 / N)
     assert np.abs(xi - warm.f).max() <= 1e-10 * np.abs(warm.f).max()
+
+
+def test_fibres_that_are_not_the_nodes_elements_are_not_kept(compiled):
+    """A previous result whose fibres disagree with its configurations (edited here:
+    doubled) hands over its nodes but not those fibres: the solve reaches the cold
+    optimum with fibres that are the configurations' increments."""
+    from dataclasses import replace
+
+    from so3 import cay_inv, vee
+
+    mod, ex = compiled("rigid_body_oc"), get("rigid_body_oc").example
+    N, h = 60, 1.0 / 60
+    cold = mod.solve_bvp(ex.start, ex.end, N, h)
+    edited = replace(cold, f=2.0 * cold.f)
+    warm = mod.solve_bvp(ex.start, ex.end, N, h, guess=edited)
+    assert cold.success and warm.success, warm.message
+    assert abs(warm.cost - cold.cost) <= 1e-10 * cold.cost
+    W = warm.g[:-1].transpose(0, 2, 1) @ warm.g[1:]
+    xi = np.array([vee(cay_inv(w)) for w in W]) / h
+    assert np.abs(xi - warm.f).max() <= 1e-10 * np.abs(warm.f).max()

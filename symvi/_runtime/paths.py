@@ -179,7 +179,8 @@ def _kept(model, previous: BVPResult, x, g, f, lam, h: float):
     fibre is its increment over h (ξ = τ⁻¹(w)/h): solved with another step it is
     rescaled by h_previous/h, which keeps the element w (kept as it was, a warm start at
     another h returned SUCCESS on fibres that were not the configurations' increments,
-    at 46 % above the optimal cost)."""
+    at 46 % above the optimal cost). A kept fibre must also agree with the one recomputed
+    from the nodes to 1e-8 of its element."""
     count = x.shape[0]
     old_x = previous.x if previous.x is not None else np.zeros((count, 0))
     old_g = _configurations(model, previous.g, count, "guess configurations") \
@@ -192,7 +193,12 @@ def _kept(model, previous: BVPResult, x, g, f, lam, h: float):
         step = float(previous.t[1]) if previous.t.size > 1 else h
         if step != h:
             old[:, scaled] *= step / h
-        f = np.where(keep[:, None], old, f)
+        # only fibres that are the elements of the new nodes (to far more than the
+        # recomputed ones' rounding): a previous result edited or inconsistent is not
+        # carried into the path
+        units = np.where(scaled, h, 1.0)
+        agree = (np.abs((old - f) * units) <= 1e-8 * (1.0 + np.abs(old * units))).all(axis=1)
+        f = np.where((keep & agree)[:, None], old, f)
     if previous.multipliers is not None and previous.multipliers.shape == lam.shape:
         lam = np.array(previous.multipliers, dtype=float)
     return np.ascontiguousarray(f), lam
