@@ -37,8 +37,8 @@ import sympy as sp
 
 from ..errors import ModelError
 from ..groupoids.base import Algebroid, Groupoid
-from .inequalities import declared, discrete
-from .model import Example, Model
+from .inequalities import declared, discrete, parameter_expression
+from .model import Example, Model, _sympify_parameters
 from .symmetry import Symmetry
 from .validation import scalar
 
@@ -125,18 +125,12 @@ def _control_symbols(controls, count: int) -> tuple[sp.Symbol, ...]:
     return symbols
 
 
-def _time_cost(value, parameters: Mapping[Any, float]) -> sp.Expr | None:
+def _time_cost(value, defaults: Mapping[sp.Symbol, float]) -> sp.Expr | None:
     """ρ of a free horizon: an expression in the parameters, positive at their defaults
     (with ρ ≤ 0 nothing stops the horizon from growing without end)."""
     if value is None:
         return None
-    rho = scalar(value, "time_cost")
-    defaults = {sp.Symbol(k, real=True) if isinstance(k, str) else k: float(v)
-                for k, v in parameters.items()}
-    unknown = rho.free_symbols - set(defaults)
-    if unknown:
-        raise ModelError(f"time_cost uses {sorted(map(str, unknown))}, which are not "
-                         f"parameters; ρ is a number or an expression in the parameters")
+    rho = parameter_expression(value, "time_cost", defaults)
     if not float(rho.xreplace(defaults)) > 0:
         raise ModelError(f"time_cost ρ = {rho} is not positive (at the parameters' default "
                          f"values): with no cost on T and no end condition fixing it, a free "
@@ -218,7 +212,8 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
                          f"{name!r}; it is C(q, y, u) with controls {list(map(str, u))}")
     if not C.free_symbols & set(u):
         raise ModelError(f"the cost of {name!r} does not depend on the controls {list(map(str, u))}")
-    rho = _time_cost(time_cost, parameters)
+    defaults = dict(_sympify_parameters(parameters))
+    rho = _time_cost(time_cost, defaults)
     EL = euler_lagrange_operator(algebroid, L)
     forces = [EL[a] for a in directions]
     return Model(
@@ -228,4 +223,4 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
         constraints=[EL[A] for A in range(len(EL)) if A not in directions],
         controls=forces, symmetries=symmetries,
         control_system=ControlSystem(L, C, u, directions, equations, *declared(
-            bounds, inequalities, u, groupoid.continuous_symbols(1), parameters), rho))
+            bounds, inequalities, u, groupoid.continuous_symbols(1), defaults), rho))

@@ -20,28 +20,31 @@ from .validation import scalar
 Interval = tuple[sp.Expr | None, sp.Expr | None]
 
 
+def parameter_expression(value, what: str, defaults: Mapping[sp.Symbol, float],
+                         hint: str = "") -> sp.Expr:
+    """``value`` as a scalar expression in the parameters (``defaults``: symbol → default
+    value), finite at their defaults; a :class:`ModelError` naming ``what`` (with
+    ``hint`` when infinite) otherwise."""
+    expr = scalar(value, what)
+    unknown = expr.free_symbols - set(defaults)
+    if unknown:
+        raise ModelError(f"the {what} uses {sorted(map(str, unknown))}, which are not "
+                         f"parameters; it is a number or an expression in the parameters")
+    if not sp.sympify(expr.xreplace(defaults)).is_finite:
+        raise ModelError(f"the {what} is not finite ({expr}){hint}")
+    return expr
+
+
 def _interval(what: str, pair, defaults: Mapping[sp.Symbol, float]) -> Interval:
-    """(lower, upper) of ``what``, each an expression in the parameters or None, checked
-    to be a proper interval at the parameters' default values."""
+    """(lower, upper) of ``what``, each an expression in the parameters or None (open),
+    checked to be a proper interval at the parameters' default values."""
     if not isinstance(pair, (tuple, list)) or len(pair) != 2:
         raise ModelError(f"bounds of {what} must be a pair (lower, upper), None for an open "
                          f"side; got {pair!r}")
-    sides = []
-    for side, value in zip(("lower", "upper"), pair):
-        if value is None:
-            sides.append(None)
-            continue
-        expr = scalar(value, f"{side} bound of {what}")
-        unknown = expr.free_symbols - set(defaults)
-        if unknown:
-            raise ModelError(f"the {side} bound of {what} uses {sorted(map(str, unknown))}, "
-                             f"which are not parameters; a bound is a number or an "
-                             f"expression in the parameters")
-        if not sp.sympify(expr.xreplace(defaults)).is_finite:
-            raise ModelError(f"the {side} bound of {what} is not finite ({expr}); give None "
-                             f"for an open side")
-        sides.append(expr)
-    lower, upper = sides
+    lower, upper = (None if value is None else
+                    parameter_expression(value, f"{side} bound of {what}", defaults,
+                                         "; give None for an open side")
+                    for side, value in zip(("lower", "upper"), pair))
     if lower is not None and upper is not None \
             and not float(lower.xreplace(defaults)) < float(upper.xreplace(defaults)):
         raise ModelError(f"{what}: lower bound {lower} is not below upper bound {upper} (at "
@@ -58,11 +61,10 @@ def _named(inequalities) -> list[tuple[str, Any]]:
 
 
 def declared(bounds: Mapping | None, inequalities, controls: Sequence[sp.Symbol],
-             coordinates: Sequence[sp.Symbol], parameters: Mapping[Any, float]):
+             coordinates: Sequence[sp.Symbol], defaults: Mapping[sp.Symbol, float]):
     """(per control its :data:`Interval`, path inequalities as (name, g) with g ≤ 0 in the
-    coordinates, controls and parameters), from what :func:`symvi.optimal_control` got."""
-    defaults = {sp.Symbol(k, real=True) if isinstance(k, str) else k: float(v)
-                for k, v in parameters.items()}
+    coordinates, controls and parameters), from what :func:`symvi.optimal_control` got;
+    ``defaults`` maps each parameter symbol to its default value."""
     by_name = {str(s): s for s in list(controls) + list(coordinates)}
     control_bounds = {u: (None, None) for u in controls}
     path: list[tuple[str, sp.Expr]] = []
