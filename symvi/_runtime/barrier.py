@@ -71,6 +71,19 @@ class Inequalities:
         stacked = windows.transpose(0, 2, 1).reshape(self.windows, -1)
         return np.einsum("wkj,wj->wk", self.jacobian, stacked)
 
+    def transposed(self, v: np.ndarray, blocks: np.ndarray, width: int) -> np.ndarray:
+        """Gᵀv in the block layout (the adjoint of :meth:`linearised`), v per window and
+        inequality: node rows of free nodes only."""
+        n, r = self.model.n, self.model.order
+        weighted = np.einsum("wkj,wk->wj", self.jacobian, v)
+        nodes = np.zeros((self.n_nodes, n))
+        for j in range(r + 1):
+            nodes[j:j + self.windows] += weighted[:, j * n:(j + 1) * n]
+        nodes[:r], nodes[self.n_nodes - r:] = 0.0, 0.0      # fixed nodes do not move
+        out = np.zeros((len(blocks), width))
+        out[:, :n] = nodes[blocks]
+        return out.reshape(-1)
+
 
 def boundary_step(values: np.ndarray, step: np.ndarray, tau: float) -> float:
     """The largest α ≤ 1 with values + α·step ≥ (1 − τ)·values (values > 0): the

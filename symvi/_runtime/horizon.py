@@ -8,8 +8,9 @@ and multipliers with the groupoid elements held fixed (the compiled ``horizon`` 
 equation F'(T) = dJ*/dT + ρ = 0, by secant steps safeguarded by bisection once F' has
 changed sign, each inner solve warm-started from the last (its fibres rescaled to keep
 the elements); a trial horizon whose solve fails (too short for the bounds: no path
-meets them) is moved halfway back to the last solved one. SUCCESS needs every inner solve's SUCCESS and the secant's estimate of
-the distance to the root, |F'(T)| / |F''(T)|, within xtol·(1 + T).
+meets them) is moved halfway back to the last solved one. SUCCESS needs every inner
+solve's SUCCESS and the secant's estimate of the distance to the root,
+|F'(T)| / |F''(T)|, within xtol·(1 + T).
 """
 from __future__ import annotations
 
@@ -44,19 +45,23 @@ def free_horizon(solve, model, p, N: int, h: float, xtol: float) -> BVPResult:
     T, result = N * h, solve(h, None)
     if not result.success:
         return _failed(result, T, "at the first horizon")
-    history = [(T, slope(model, result, p), result.cost)]
+    history = [(T, slope(model, result, p))]     # (horizon, F') of every solve
     bracket = None
     step = 0.1 * T
     for _ in range(MAX_HORIZON_STEPS):
-        T_now, g_now, _ = history[-1]
+        T_now, g_now = history[-1]
         if len(history) == 1:
             T_next = T_now - np.sign(g_now) * step
         else:
-            T_prev, g_prev, _ = history[-2]
+            T_prev, g_prev = history[-2]
             curvature = (g_now - g_prev) / (T_now - T_prev)
-            T_next = T_now - g_now / curvature if curvature > 0 else T_now - np.sign(g_now) * step
-            if abs(T_now - T_prev) <= xtol * (1 + T_now) and curvature > 0 and abs(g_now / curvature) <= xtol * (1 + T_now):
-                return _converged(result, history, abs(g_now / curvature))
+            if curvature > 0:
+                distance = abs(g_now / curvature)
+                if max(abs(T_now - T_prev), distance) <= xtol * (1 + T_now):
+                    return _converged(result, history, distance)
+                T_next = T_now - g_now / curvature
+            else:
+                T_next = T_now - np.sign(g_now) * step
         if bracket is not None:
             low, high = bracket
             if not low < T_next < high:
@@ -73,7 +78,7 @@ def free_horizon(solve, model, p, N: int, h: float, xtol: float) -> BVPResult:
         if not trial.success:
             return _failed(trial, T_next, f"at horizon T = {T_next:.6g}")
         result = trial
-        history.append((T_next, slope(model, result, p), result.cost))
+        history.append((T_next, slope(model, result, p)))
         bracket = _bracket(history)
         step *= 2.0
     return replace(result, status=Status.MAX_ITERATIONS, message=(
@@ -83,15 +88,15 @@ def free_horizon(solve, model, p, N: int, h: float, xtol: float) -> BVPResult:
 
 def _bracket(history) -> tuple[float, float] | None:
     """The tightest (T_low, T_high) around the root of F' among the horizons tried."""
-    below = [T for T, g, _ in history if g < 0]
-    above = [T for T, g, _ in history if g > 0]
+    below = [T for T, g in history if g < 0]
+    above = [T for T, g in history if g > 0]
     if not below or not above:
         return None
     return max(below), min(above)
 
 
 def _converged(result: BVPResult, history, distance: float) -> BVPResult:
-    T, g, _ = history[-1]
+    T, g = history[-1]
     return replace(result, message=(
         f"free horizon T = {T:.12g} after {len(history)} solves (dJ/dT + ρ = {g:.2e}, "
         f"estimated distance to the optimal T {distance:.1e}); last solve: "

@@ -93,17 +93,7 @@ class InteriorPoint:
 
     def barrier_rhs(self, mu: float) -> np.ndarray:
         """Gᵀ(μ/s) in the block layout: what the barrier adds to the reduced residual."""
-        n, r = self.model.n, self.model.order
-        G, v = self.inequalities.jacobian, mu / self.s
-        nodes = np.zeros((self.inequalities.n_nodes, n))
-        weighted = np.einsum("wkj,wk->wj", G, v)
-        for j in range(r + 1):
-            nodes[j:j + weighted.shape[0]] += weighted[:, j * n:(j + 1) * n]
-        out = np.zeros((len(self.blocks), self.width))
-        out[:, :n] = nodes[self.blocks]
-        free = (self.blocks >= r) & (self.blocks < self.inequalities.n_nodes - r)
-        out[~free] = 0.0
-        return out.reshape(-1)
+        return self.inequalities.transposed(mu / self.s, self.blocks, self.width)
 
     def kkt_correction(self, ab, bw: int, res: np.ndarray, path: Path) -> float:
         """‖(Δη, Δλ, Δz)‖∞ of the full Newton correction of the unperturbed KKT system
@@ -111,7 +101,7 @@ class InteriorPoint:
         first-order estimate of the distance to its KKT point, barrier's bias included.
         Not Δs, which is Δη's noise amplified by G (:meth:`_barrier_error`)."""
         delta = self.problem.solve(ab, bw, -(res - self.barrier_rhs(self.mu * self.problem.h)))
-        return self._barrier_error(delta, self.steps(delta, path, 0.0)[1], path)
+        return self._barrier_error(delta, self.steps(delta, path, 0.0)[1])
 
     # -- the iteration -------------------------------------------------------------------
     def solve(self, path: Path, maxiter: int):
@@ -169,7 +159,7 @@ class InteriorPoint:
         while True:
             delta = self.problem.solve(ab, bw, -res)
             ds, dz, Gd = self.steps(delta, path, self.mu * h)
-            error = self._barrier_error(delta, dz, path)
+            error = self._barrier_error(delta, dz)
             correction = self.kkt_correction(ab, bw, res, path)
             self.corrections.append(max(error, correction))
             if max(error, correction) < self.best[0]:
@@ -226,7 +216,7 @@ class InteriorPoint:
         return None
 
     @staticmethod
-    def _barrier_error(delta, dz, path: Path) -> float:
+    def _barrier_error(delta, dz) -> float:
         """The barrier problem's remaining error: its full Newton correction in the node
         corrections, λ and z. Not in the slacks: Δs = −(c + s) − GΔη carries Δη's noise
         amplified by G (∂u/∂η ∝ 1/h² for controls), and s is c's function anyway."""

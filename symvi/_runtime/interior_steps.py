@@ -84,9 +84,9 @@ def _backtrack(ip, path: Path, ab, bw: int, delta, ds, dz, Gd, c, shift: float):
     nu = problem.penalty = max(wanted, 0.5 * (problem.penalty + wanted))
     descent = float(ip.stencil[nodes] @ delta[nodes] + lam @ phi_d - (z * Gd).sum()) \
         - mu * float((ds / s).sum()) - nu * infeasibility
-    cost, noise = problem.merit(path)
-    if curvature(ip.model, ab, bw, delta, nodes, shift) <= 0 or descent >= 0:
+    if descent >= 0 or curvature(ip.model, ab, bw, delta, nodes, shift) <= 0:
         return None
+    cost, noise = problem.merit(path)
     if -descent <= noise * (1 + nu):
         return None
     base = cost - mu * float(np.log(s).sum()) + nu * infeasibility
@@ -96,8 +96,7 @@ def _backtrack(ip, path: Path, ab, bw: int, delta, ds, dz, Gd, c, shift: float):
         trial = problem.moved(path, delta, alpha)
         if trial is not None and \
                 merit(ip, trial, s + alpha * ds, nu) <= base + 1e-4 * alpha * descent:
-            return _accept(ip, trial, s + alpha * ds, z, dz, boundary_step(z, dz, tau),
-                                alpha)
+            return _accept(ip, trial, s + alpha * ds, z, dz, boundary_step(z, dz, tau), alpha)
         alpha /= 2
     return None
 
