@@ -224,7 +224,7 @@ class Problem:
         its increment hξ, a pair fibre is the node itself), a multiplier as itself."""
         m, s = self.model, self.model.constraints
         blocks = self._blocks(path)
-        scaled = np.array(m.info.get("step_scaled") or [False] * m.n, dtype=bool)
+        scaled = m.step_scaled
         # blocks run from node T0 ≥ 1 to N − T0: the elements before and after each node
         # exist, so slices (no fancy-index copies) select them
         first, last = int(blocks[0]), int(blocks[-1])

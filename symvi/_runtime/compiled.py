@@ -28,6 +28,9 @@ class CompiledModel:
         self.n: int = info["fibre_dim"]
         #: s, the constraints per window (multipliers λ^k ∈ R^s).
         self.constraints: int = info.get("constraints", 0)
+        #: Per fibre coordinate: whether it is an increment over h (a group factor's ξ).
+        self.step_scaled = np.array(info.get("step_scaled") or [False] * self.n, dtype=bool)
+        self.step_scaled.flags.writeable = False
         #: The inequalities c ≤ 0 of every window (bounded optimal control), by name.
         self.inequalities: tuple[str, ...] = tuple(info.get("inequalities", ()))
         self.parameter_names: tuple[str, ...] = tuple(info["parameters"])

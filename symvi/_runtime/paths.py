@@ -189,7 +189,7 @@ def _kept(model, previous: BVPResult, x, g, f, lam, h: float):
     if previous.f.shape == f.shape:
         keep = same[:-1] & same[1:]
         old = np.array(previous.f, dtype=float)
-        scaled = np.array(model.info.get("step_scaled") or [False] * model.n, dtype=bool)
+        scaled = model.step_scaled
         step = float(previous.t[1]) if previous.t.size > 1 else h
         if step != h:
             old[:, scaled] *= step / h
