@@ -74,9 +74,10 @@ def declared(bounds: Mapping | None, inequalities, controls: Sequence[sp.Symbol]
             raise ModelError(f"bounds given for {key!r}, which is not a control or coordinate; "
                              f"the controls are {[str(u) for u in controls]}, the coordinates "
                              f"{[str(c) for c in coordinates]}")
-        kind = "control" if symbol in control_bounds else "coordinate"
-        lower, upper = _interval(f"{kind} {symbol}", pair, defaults)
-        if kind == "control":
+        is_control = symbol in control_bounds
+        lower, upper = _interval(f"{'control' if is_control else 'coordinate'} {symbol}",
+                                 pair, defaults)
+        if is_control:
             control_bounds[symbol] = (lower, upper)
             continue
         if upper is not None:
