@@ -36,6 +36,9 @@ class Problem:
         #: :func:`.globalisation.descent_step`).
         self.minimise = bool(model.info.get("controls"))
         self.shift, self.penalty = 0.0, 0.0
+        #: Whether the last step was a full, unshifted Newton step from an iterate whose
+        #: Hessian was positive definite (:func:`.globalisation.descent_step`).
+        self.convex = False
         #: The residual's rounding level at the last iteration (bvp._rounding_level).
         self.level = None
         self._band = self._work = None   # reused: fresh pages are slow to touch at large N

@@ -136,7 +136,7 @@ def _unbounded(problem: Problem, path: Path, maxiter: int, xtol: float):
     multipliers held at zero) solved from ``path``, the interior-point solve's start
     (:func:`.interior.bounded`); None where that solve fails."""
     solved, _, steps, status, _ = _newton(problem, path.copy(), maxiter, xtol, 0.0)
-    problem.shift, problem.penalty = 0.0, 0.0
+    problem.shift, problem.penalty, problem.convex = 0.0, 0.0, False
     return (solved if status == Status.SUCCESS else None), len(steps)
 
 
@@ -295,10 +295,13 @@ def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list,
                 f"that undoes rounding the path's unknowns by one unit in the last "
                 f"place ({floor:.1e})", max(size, floor), tolerance)
         state, taken = natural_step(problem, state, delta, ab, bw, size)
+        problem.convex = False
     if taken is None and problem.minimise:
-        state, taken = descent_step(problem, state, res, ab, bw, delta)
+        state, taken = descent_step(problem, state, res, ab, bw, delta,
+                                    contracting=size <= corrections[-2] / 4)
     if taken is None and norms[-1] > level:
         state, taken = line_search(problem, state, delta, res)
+        problem.convex = False
     if taken is None:
         if norms[-1] <= level:  # no descent left below the rounding level
             return state, None, *_rounding_limited(

@@ -21,7 +21,8 @@ def curvature(model, ab: np.ndarray, bw: int, delta: np.ndarray, nodes: np.ndarr
     return float(d @ product(model, ab, bw, d)) + shift * float(d @ d)
 
 
-def descent_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0**-12):
+def descent_step(problem, state, res, ab, bw, delta, contracting: bool = False,
+                 min_alpha: float = 2.0**-12):
     """A descent step on the cost S = Σ L_d, or with constraints Φ_d on its ℓ1 exact
     penalty φ = S + ν‖Φ_d‖₁ (Nocedal & Wright §18.3, ν above the largest new multiplier).
     ν may fall again, halfway per iteration (Powell's rule): far from feasibility the
@@ -50,7 +51,11 @@ def descent_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0**-12
     positive definite (:func:`.optimality.convexifying_shift`, modified Newton), so no
     step heads for a saddle (the battery: rigid_body_oc from the zero guess at N = 1000
     in 17 iterations instead of 353; double_pendulum_oc from a perturbed guess to its
-    minimum instead of a saddle). With constraints the same correction on W + ρAᵀA was
+    minimum instead of a saddle). That test is skipped while Newton ``contracting`` (its
+    correction at most a quarter of the one before) continues a run of full unshifted
+    steps from a verified iterate: the iterates stay within a third of its correction, so
+    the definiteness found there carries (rigid_body_oc at N = 1000: two band Cholesky
+    factorisations of four saved), and the final test still verifies the minimum. With constraints the same correction on W + ρAᵀA was
     measured worse for the heavy top with rotors (19 of 22 battery guesses instead of 21
     at N = 100), so the curvature test stays; a saddle reached anyway is caught after
     convergence (:func:`.bvp._minimum`).
@@ -79,7 +84,7 @@ def descent_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0**-12
     if abs(slope(delta)) <= noise * (1 + problem.penalty):
         return state, None
     scale, shift = float(np.abs(ab[2 * bw][nodes]).max(initial=0.0)), problem.shift
-    if not rows.any():
+    if not rows.any() and not (contracting and problem.convex):
         shift = convexifying_shift(lambda mu: problem.definite(ab, bw, mu * scale), shift)
     while shift <= 1e3:
         if shift > 0.0:
@@ -97,6 +102,7 @@ def descent_step(problem, state, res, ab, bw, delta, min_alpha: float = 2.0**-12
                     <= cost + nu * infeasibility + 1e-4 * alpha * descent:
                 problem.shift = shift / 10 if alpha == 1.0 and shift > 1e-10 else \
                     (0.0 if alpha == 1.0 else shift)
+                problem.convex = not rows.any() and alpha == 1.0 and shift == 0.0
                 return trial, alpha * float(np.abs(delta).max(initial=0.0))
             alpha /= 2
         shift = max(10 * shift, 1e-8)
