@@ -29,7 +29,7 @@ import numpy as np
 from .band import cholesky_pivot
 from .barrier import Inequalities, next_barrier
 from .interior_steps import step
-from .optimality import second_order
+from .optimality import Curvature, second_order
 from .paths import Path
 from .results import BVPResult, Status
 
@@ -40,6 +40,9 @@ MU_START, MU_FLOOR = 0.1, 1e-3
 KAPPA_EPSILON = 10.0
 #: Iterations over which the KKT correction must halve to count as still converging.
 STAGNATION = 6
+#: Penalties ρ (times W's scale over |∇c_j|²) on the active inequalities in the final
+#: second-order test, and the cap on Σ in the iteration's inertia test (×10⁶).
+PENALTIES, CAP = (0.0, 1.0, 1e2, 1e4, 1e6), 1e6
 
 
 class InteriorPoint:
@@ -79,6 +82,7 @@ class InteriorPoint:
         self.stencil = res.copy()
         # the scale of inertia-correcting shifts: W's, not Σ's (10¹⁰ larger near the end)
         self.scale = float(np.abs(ab[2 * bw][self.nodes]).max(initial=0.0))
+        self.hessian = np.array(ab, order="F")      # W, before the barrier adds GᵀΣG
         finite &= self.inequalities.add_barrier(path, p, h, self.z(path), self.s,
                                                 self.mu * h, res, ab)
         return (res, ab, bw, dual, eq) if finite else None
@@ -242,19 +246,12 @@ class InteriorPoint:
         for growing ρ (Debreu's lemma, as for the equality rows). Not the reduced matrix
         W + GᵀΣG of the iteration: near the end Σ exceeds W by 10¹³ on active rows and
         its Cholesky factorisation is rounding. SUCCESS, or SADDLE."""
-        problem, ineq = self.problem, self.inequalities
-        _, ab, bw, finite = problem.assemble(path, True)
+        _, ab, bw, finite = self.problem.assemble(path, True)
         active = (self.z(path) > self.s).astype(float)
         scale = float(np.abs(ab[2 * bw][self.nodes]).max(initial=0.0))
-        gradient = float((ineq.jacobian ** 2).sum(axis=2).max(initial=0.0))
         verdict = None
-        for rho in (0.0, 1.0, 1e2, 1e4, 1e6) if finite else ():
-            work = np.array(ab, order="F")
-            weight = np.ascontiguousarray(active * rho * scale / max(gradient, 1e-300))
-            ineq.add_barrier(path, problem.p, problem.h, weight, np.ones_like(weight), 0.0,
-                             np.zeros(ab.shape[1]), work)
-            verdict = second_order(work, bw, self.rows,
-                                   lambda: cholesky_pivot(self.model, work, bw))
+        for rho in PENALTIES if finite else ():
+            verdict = self.curvature(path, ab, bw, active * rho * scale / self._gradients())
             if verdict.minimum:
                 return Status.SUCCESS, message
         pivot = "" if verdict is None else f" (Cholesky pivot {verdict.pivot:.1e})"
@@ -263,6 +260,45 @@ class InteriorPoint:
             f"of the Lagrangian is not positive definite on the tangent space of the "
             f"equalities and active inequalities{pivot} — a saddle or maximum; start from "
             f"another guess")
+
+    def curvature(self, path: Path, hessian, bw: int, weight: np.ndarray,
+                  shift: float = 0.0) -> Curvature:
+        """The second-order test (:func:`.optimality.second_order`: positive definite
+        on the equalities' tangent space, by Debreu's lemma) of W + Gᵀ diag(weight) G +
+        shift·I on the node corrections, W the Hessian of the Lagrangian in ``hessian``
+        (band storage, left intact) and G the inequalities' gradients at ``path``."""
+        problem, work = self.problem, np.array(hessian, order="F")
+        weight = np.ascontiguousarray(weight)
+        self.inequalities.add_barrier(path, problem.p, problem.h, weight,
+                                      np.ones_like(weight), 0.0, np.zeros(work.shape[1]), work)
+        work[2 * bw] += shift * self.nodes
+        return second_order(work, bw, self.rows, lambda: cholesky_pivot(self.model, work, bw))
+
+    def _gradients(self) -> np.ndarray:
+        """|∇c_j|² per window and inequality: the penalties on the active ones are
+        measured per row, since a bound on a control (∂u/∂η ∝ 1/h²) and one on a
+        coordinate differ in scale by 1/h⁴ (a common scale hid the cart-pole's track
+        limit: a false SADDLE at a verified minimum)."""
+        return np.maximum((self.inequalities.jacobian ** 2).sum(axis=2), 1e-300)
+
+    def inertia_shift(self, path: Path, bw: int, start: float) -> float:
+        """The inertia correction of the step (Wächter & Biegler 2006, §3.1, with
+        Debreu's test for the inertia LAPACK's band routines do not give): the smallest
+        δ in start, 10 start, … (from 1e-8, relative to W's largest diagonal entry) for
+        which W + GᵀΣ'G + δ·I is positive definite on the equalities' tangent space, so
+        that the step descends on the barrier problem and no saddle attracts it; inf if
+        none up to 1e3. Σ' = min(Σ, 10⁶ × scale / |∇c_j|²): where Σ = z/s exceeds W
+        by 10¹⁰ near the end its Cholesky factorisation is rounding, and a capped Σ'
+        only makes the test stricter (GᵀΣG − GᵀΣ'G is positive semidefinite). The
+        cart-pole swing-up with force and track limits: without it 4 of 8 limit pairs
+        ended in MAX_ITERATIONS and one at a saddle; with it all 8 succeed."""
+        weight = np.minimum(self.z(path) / self.s, CAP * self.scale / self._gradients())
+        shift = start
+        while shift <= 1e3:
+            if self.curvature(path, self.hessian, bw, weight, shift * self.scale).minimum:
+                return shift
+            shift = max(10 * shift, 1e-8)
+        return np.inf
 
     def result(self, path: Path, iterations: int, status: Status, message: str) -> BVPResult:
         """The :class:`BVPResult` of the solve, with the bound multipliers, the active

@@ -2,9 +2,9 @@
 and how a step along the reduced Newton correction is found and taken.
 
 Armijo backtracking on the ℓ1 exact penalty of the barrier problem,
-S − μh Σ log s + ν(‖Φ_d‖₁ + ‖c + s‖₁), from the fraction-to-the-boundary step, with the
-curvature test of :func:`.globalisation.descent_step` shifting the node block where the
-step meets negative curvature; backtracking on the KKT residual's norm where the merit
+S − μh Σ log s + ν(‖Φ_d‖₁ + ‖c + s‖₁), from the fraction-to-the-boundary step, the node
+block shifted by the inertia correction and by the curvature test of
+:func:`.globalisation.descent_step` where the step still meets negative curvature; backtracking on the KKT residual's norm where the merit
 rejects a Newton step (the Maratos effect); Deuflhard's natural monotonicity test near
 the solution, where the merit's rounding hides the decrease. Each takes the
 :class:`.interior.InteriorPoint` ``ip`` and returns the moved path or None.
@@ -36,8 +36,9 @@ def merit(ip, path: Path, s: np.ndarray, nu: float) -> float:
 
 
 def step(ip, path: Path, res, ab, bw: int, delta, ds, dz, Gd, error: float):
-    """A step along the reduced correction (shifted where it is no descent or meets
-    negative curvature, as in :func:`.globalisation.descent_step`), cut by the
+    """A step along the reduced correction (shifted by the inertia correction
+    :meth:`.interior.InteriorPoint.inertia_shift`, and further where it is no descent or
+    meets negative curvature, as in :func:`.globalisation.descent_step`), cut by the
     fraction-to-the-boundary rule and Armijo backtracking on :func:`merit`; near
     the solution, where the merit's rounding hides the step's decrease, the full
     step by Deuflhard's natural monotonicity test (:func:`_natural`). The moved
@@ -47,9 +48,7 @@ def step(ip, path: Path, res, ab, bw: int, delta, ds, dz, Gd, error: float):
     problem, mu = ip.problem, ip.mu * ip.problem.h
     c, nodes = ip.inequalities.values.copy(), ip.nodes
     scale = ip.scale
-    # the curvature test, not the inertia of a Cholesky factorisation: near the end
-    # Σ's entries exceed W's by 10¹⁰ and more, and that factorisation fails by rounding
-    shift = problem.shift
+    shift = ip.inertia_shift(path, bw, problem.shift)
     while shift <= 1e3:
         if shift > 0.0:
             try:
