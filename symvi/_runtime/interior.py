@@ -4,7 +4,7 @@ inequalities (issue 21).
 Newton's method on the perturbed KKT system of min S = Σ L_d subject to Φ_d = 0 and
 c ≤ 0 on every window (:mod:`.barrier`), with the slack and multiplier steps eliminated
 per window so that each iteration solves the equality solver's band. The barrier
-parameter falls by IPOPT's monotone rule (:func:`.barrier.next_barrier`) once the
+parameter falls by a monotone rule (:func:`.barrier.next_barrier`) once the
 barrier problem is solved to its own accuracy, and only while its bias exceeds the
 tolerance; steps keep s, z > 0 by the fraction-to-the-boundary rule and are globalised
 as :mod:`.interior_steps` describes.

@@ -20,6 +20,12 @@ from .paths import Path
 #: Relative size of a correction below which a full step whose merit decrease is rounding
 #: may be taken by the natural monotonicity test instead (:func:`_natural`).
 NEAR = 1e-6
+#: The shortest step taken along a direction while a larger shift could still be tried:
+#: a Newton step far along a nearly flat direction of the reduced Hessian (the cart-pole
+#: swing-up from a local optimum without bounds: curvature 2e-3 along a step of 0.8)
+#: passes the merit only at α ≈ 2⁻¹³ again and again, while a shifted, shorter step
+#: makes progress (that start: 4 iterations instead of 100 without convergence).
+SHORT = 2.0**-8
 
 
 def merit(ip, path: Path, s: np.ndarray, nu: float) -> float:
@@ -57,7 +63,8 @@ def step(ip, path: Path, res, ab, bw: int, delta, ds, dz, Gd, error: float):
                 shift = max(10 * shift, 1e-8)
                 continue
             ds, dz, Gd = ip.steps(delta, path, mu, c)
-        moved = _backtrack(ip, path, ab, bw, delta, ds, dz, Gd, c, shift * scale)
+        moved = _backtrack(ip, path, ab, bw, delta, ds, dz, Gd, c, shift * scale,
+                           SHORT if shift < 1e2 else 2.0**-20)
         if moved is None and shift == 0.0:
             moved = _natural(ip, path, ab, bw, delta, ds, dz, error) \
                 if error <= NEAR * (1.0 + problem.size(path)) \
@@ -69,9 +76,11 @@ def step(ip, path: Path, res, ab, bw: int, delta, ds, dz, Gd, error: float):
     return None
 
 
-def _backtrack(ip, path: Path, ab, bw: int, delta, ds, dz, Gd, c, shift: float):
-    """Armijo backtracking on :func:`merit` from the fraction-to-the-boundary step,
-    if ``delta`` is a descent direction with positive curvature; else None."""
+def _backtrack(ip, path: Path, ab, bw: int, delta, ds, dz, Gd, c, shift: float,
+               min_alpha: float = 2.0**-20):
+    """Armijo backtracking on :func:`merit` from the fraction-to-the-boundary step down
+    to ``min_alpha``, if ``delta`` is a descent direction with positive curvature; else
+    None."""
     problem, mu = ip.problem, ip.mu * ip.problem.h
     rows, nodes = ip.rows, ip.nodes
     z, s = ip.z(path).copy(), ip.s
@@ -91,7 +100,7 @@ def _backtrack(ip, path: Path, ab, bw: int, delta, ds, dz, Gd, c, shift: float):
     base = cost - mu * float(np.log(s).sum()) + nu * infeasibility
     tau = max(TAU_MIN, 1.0 - ip.mu)
     alpha = boundary_step(s, ds, tau)
-    while alpha >= 2.0**-20:
+    while alpha >= min_alpha:
         trial = problem.moved(path, delta, alpha)
         if trial is not None and \
                 merit(ip, trial, s + alpha * ds, nu) <= base + 1e-4 * alpha * descent:

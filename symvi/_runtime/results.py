@@ -188,6 +188,8 @@ class BVPResult(_Result):
     active : (N−r+1, I) where an inequality is active (its multiplier exceeds its slack
         −c), else None.
     inequalities : the names of the inequalities, e.g. ``"tau1 <= tau_max"``.
+    active_set : per window, the names of its active inequalities (a property).
+    T : the horizon t[-1] (a property): the optimal one with a free final time.
     history : per interior-point iteration, arrays ``mu`` (barrier parameter per unit
         time), ``primal`` and ``dual`` infeasibility, ``complementarity`` (max s·z) and
         ``alpha`` (step length; 0 where μ fell), like IPOPT's log; else None.
@@ -216,6 +218,18 @@ class BVPResult(_Result):
     active: np.ndarray | None = None
     inequalities: tuple[str, ...] = ()
     history: dict | None = None
+
+    @property
+    def T(self) -> float:
+        """The horizon N·h: with a free final time (``time_cost``), the optimal one."""
+        return float(self.t[-1]) if len(self.t) else 0.0
+
+    @property
+    def active_set(self) -> list[tuple[str, ...]] | None:
+        """Per window, the names of its active inequalities (from :attr:`active`)."""
+        if self.active is None:
+            return None
+        return [tuple(n for n, a in zip(self.inequalities, row) if a) for row in self.active]
 
     def __repr__(self) -> str:
         final = {name: getattr(self, name) for name in ("x", "g", "f")

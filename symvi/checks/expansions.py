@@ -333,15 +333,24 @@ def expand_stencil(outputs: sp.Matrix, z: Sequence[sp.Symbol], groupoid, step: s
 
 
 def _stencil_kernel(model: Model, dm: DerivedModel):
-    """(residual, kernel, windows, multipliers per window) of the residual at the middle
-    node: the step kernel, or the stencil kernel of a constrained model."""
-    if model.constraints:
-        if "stencil" not in [k.name for k in dm.kernels]:
-            raise ModelError(f"model {model.name!r} has constraints but no stencil kernel")
-        kernel = dm.kernel("stencil")
-        return dict(kernel.outputs)["residual"], kernel, dm.order + 1, dm.constraint_count
-    kernel = dm.kernel("step")
-    return dict(kernel.outputs)["residual"], kernel, 0, 0
+    """(residual, coordinates, definitions, windows, multipliers per window) of the
+    residual at the middle node: the step kernel, or the stencil kernel of a constrained
+    model — with a bounded model's inequality multipliers z set to zero (the residual of
+    the problem without its inequalities, which is what the continuous equations
+    describe)."""
+    if not model.constraints:
+        kernel = dm.kernel("step")
+        return dict(kernel.outputs)["residual"], kernel.z, kernel.definitions, 0, 0
+    if "stencil" not in [k.name for k in dm.kernels]:
+        raise ModelError(f"model {model.name!r} has constraints but no stencil kernel")
+    kernel, windows, s = dm.kernel("stencil"), dm.order + 1, dm.constraint_count
+    per = s + len(dm.inequality_names)
+    head = len(kernel.z) - windows * per
+    bound = {kernel.z[head + w * per + k]: sp.S.Zero
+             for w in range(windows) for k in range(s, per)}
+    z = [c for c in kernel.z if c not in bound]
+    definitions = tuple((d, e.xreplace(bound)) for d, e in kernel.definitions)
+    return (dict(kernel.outputs)["residual"].xreplace(bound), z, definitions, windows, s)
 
 
 @expansion_scope
@@ -371,13 +380,13 @@ def residual_expansion(model: Model, *, derived: DerivedModel | None = None,
             if len(expansion.terms) >= terms or through >= max_power:
                 return expansion
             through = min(max_power, through + 2)
-    residual, kernel, windows, count = _stencil_kernel(model, dm)
+    residual, z, definitions, windows, count = _stencil_kernel(model, dm)
     r = dm.order
     through = min(3, max_power)
     while True:
-        expansion = expand_stencil(residual, kernel.z, model.groupoid, dm.step,
+        expansion = expand_stencil(residual, z, model.groupoid, dm.step,
                                    elements=2 * r, centre=r, order=r, through=through,
-                                   definitions=kernel.definitions, windows=windows,
+                                   definitions=definitions, windows=windows,
                                    multipliers=count, with_multipliers=multipliers, t=t)
         if len(expansion.terms) >= terms or through >= max_power:
             return expansion

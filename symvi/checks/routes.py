@@ -59,8 +59,8 @@ def _direction_names(G) -> list[str]:
 
 
 def _residual_kernel(derived):
-    # the step kernel where there is one: a bounded model's stencil also weighs its
-    # inequalities, which route 2 does not (without them the two are one residual)
+    # the step kernel where there is one; a bounded model's stencil also weighs its
+    # inequalities, whose multipliers _run sets to zero (route 2 does not weigh them)
     for name in ("step", "stencil"):
         try:
             return derived.kernel(name)
@@ -136,7 +136,10 @@ def _run(ctx, dm, kernel) -> CheckResult:
                  f"f = {[_fmt(f, 8) for f in fs]})")
         structure += _structure_maps(G, geo, elements if sample == 0 else [], where)
         # Route 1: the engine's residual at the middle node.
-        z = list(x0) + [v for f in fs for v in f] + [v for lam in lams for v in lam]
+        # a bounded model's stencil weighs its inequalities too: z = 0 there (route 2
+        # is the problem without them)
+        bound = (0,) * len(dm.inequality_multipliers) if kernel.name == "stencil" else ()
+        z = list(x0) + [v for f in fs for v in f] + [v for lam in lams for v in lam + bound]
         if len(kernel.z) != len(z):
             raise ModelError(f"route 2: the {kernel.name!r} kernel has {len(kernel.z)} "
                              f"coordinates, expected {len(z)} (x_0, f_0…f_{2 * r - 1}, λ)")

@@ -464,17 +464,19 @@ def step_jacobian(dm: DiscreteModel) -> tuple[sp.Matrix, _Stencil]:
     Unconstrained: ∂R/∂f_{K−1} of the residual at the middle node of 2r elements (D₁₂L_d,
     resp. D₁₃L_d, on the pair groupoid). Constrained: the bordered matrix
     [[∂R/∂f_{K−1}, ∂R/∂λ^r], [∂Φ_d/∂f_{K−1}, 0]] of the last element and the last window's
-    multipliers λ^r, Φ_d on that window.
+    multipliers λ^r, Φ_d on that window. With inequalities, the step map of the problem
+    without them (z = 0), as the ``step`` kernels.
     """
-    engine, r = _Engine(dm), dm.order
+    engine, r, s = _Engine(dm), dm.order, len(dm.constraints)
     constrained = bool(dm.constraints)
     full = _stencil(dm, 2 * r, windows=r + 1 if constrained else 0)
-    residual = engine.variation(full, r, range(r + 1))
+    unbounded = {z: 0 for window in full.multipliers for z in window[s:]}
+    residual = engine.variation(full, r, range(r + 1)).xreplace(unbounded)
     unknown = full.fs[-1]
     J = jacobian(residual, unknown)
     if constrained:
         phi = engine.window_values(full, r, dm.constraints)
-        J = sp.Matrix.vstack(sp.Matrix.hstack(J, jacobian(residual, full.multipliers[r])),
+        J = sp.Matrix.vstack(sp.Matrix.hstack(J, jacobian(residual, full.multipliers[r][:s])),
                              sp.Matrix.hstack(jacobian(phi, unknown),
                                               sp.zeros(len(phi), len(phi))))
     return J, full

@@ -1,0 +1,41 @@
+"""A cart-pole swing-up with a force limit and a track-length limit (issue 21).
+
+The cart-pole of :mod:`symvi.models.cart_pole_oc` — cart position x, actuated by a force
+u; pole angle θ from the upright, unactuated — swung up from hanging (θ = π) to upright
+(θ = 0), the cart at x = 0 and at rest at both ends, in T = 2.5, minimising ½∫u² dt, with
+|u| ≤ u_max = 14 and the cart on a track |x| ≤ d = 0.8 (at every window's quadrature
+point). Without limits the swing-up needs a peak force of 14.9 and runs the cart out to
+x = 0.92; with them the force saturates on 11 of 249 windows at N = 250 and the cart
+touches the end of its track (tests/test_bounded_cart_pole.py: the same optimum as
+SLSQP's on the same discrete problem).
+
+The pole's equation EL(L)_θ = 0 is a second-order constraint with a multiplier per
+window, so the interior-point solve carries equality constraints beside the bounds, and
+its steps an inertia correction (``_runtime/interior.py``). There are other local
+optima: some perturbed guesses swing the pole round the other way (cost 20.47 at
+N = 250, no limit active). From N ≈ 1000 on the solve does not converge yet (README,
+"Bounds and path inequalities").
+"""
+import numpy as np
+import sympy as sp
+
+from symvi import Example, PairGroupoid, optimal_control
+
+T, N = 2.5, 250
+G = PairGroupoid("x theta")
+(x, th), (v, w) = G.q, G.qdot
+M, m, ell, g = sp.symbols("M m ell g", positive=True)
+u_max, d = sp.symbols("u_max d", positive=True)
+u = sp.Symbol("u", real=True)
+
+model = optimal_control(
+    name="cart_pole_swing_up", groupoid=G,
+    lagrangian=(M + m) * v**2 / 2 + m * ell * v * w * sp.cos(th) + m * ell**2 * w**2 / 2
+    - m * g * ell * sp.cos(th),
+    cost=u**2 / 2, controls=[u], actuated=[0],
+    parameters={M: 1.0, m: 0.3, ell: 0.5, g: 9.81, u_max: 14.0, d: 0.8},
+    bounds={u: (-u_max, u_max), x: (-d, d)},
+    example=Example(h=T / N, n_steps=N, start=np.array([[0.0, np.pi]] * 2),
+                    end=np.zeros((2, 2))),
+    description="Cart-pole swing-up with |u| ≤ u_max and the cart on a track |x| ≤ d: "
+                "min ½∫u² (issue 21)")
