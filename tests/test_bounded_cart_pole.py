@@ -141,3 +141,20 @@ def test_every_success_from_perturbed_guesses_is_a_feasible_minimum(cart_pole):
     assert {"cubic", "chord"} <= costs.keys()
     minima = np.array(sorted(set(round(v, 6) for v in costs.values())))
     assert len(minima) <= 2 and np.allclose(minima, [20.664623, 32.433644][-len(minima):])
+
+
+@pytest.mark.parametrize("start, end, message", [
+    ([[0.9, np.pi]] * 2, None, r"start: the fixed element 0 \(nodes 0 and 1\) lies outside "
+                               r"the bounds: 'x <= d' is violated by 0\.1 "),
+    (None, [[-0.85, 0.0]] * 2, r"end: the fixed element 99 \(nodes 99 and 100\) lies outside "
+                               r"the bounds: 'x >= -d' is violated by 0\.05 "),
+])
+def test_boundary_data_outside_the_bounds_are_refused(cart_pole, start, end, message):
+    """A cart that starts (or ends) beyond the end of its track: a ValueError naming the
+    end, the element and the bound, before any iteration."""
+    model, module = cart_pole
+    ex = model.example
+    start = ex.start if start is None else np.array(start)
+    end = ex.end if end is None else np.array(end)
+    with pytest.raises(ValueError, match=message):
+        module.solve_bvp(start, end, 100, T / 100)

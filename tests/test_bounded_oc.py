@@ -190,6 +190,18 @@ def test_converges_from_every_guess(slew, N):
     np.testing.assert_allclose(costs, reference.cost, rtol=1e-9)
 
 
+def test_boundary_rates_beyond_the_rate_limit_are_refused(slew):
+    """Start nodes 0.02 rad apart about x in h = 0.01 (a body rate of 2) under a rate
+    limit of 1.45: the fixed first element is outside the bounds, and the error says so."""
+    prob = BoundedSlew(100, 11.0)
+    tilted = _cay(np.array([0.02, 0.0, 0.0]))
+    with pytest.raises(ValueError, match=r"start: the fixed element 0 \(nodes 0 and 1\) lies "
+                                         r"outside the bounds: 'Omega1 <= omega_max' is "
+                                         r"violated by 0\.55"):
+        slew.solve_bvp(np.array([np.eye(3), tilted]), prob.boundary[1], 100, 0.01,
+                       params=dict(omega_max=1.45))
+
+
 def _cay(v):
     from so3 import cay, hat
     return cay(hat(v))

@@ -85,6 +85,33 @@ class Inequalities:
         return out.reshape(-1)
 
 
+#: A control-free inequality of a fixed boundary element may exceed 0 by this much,
+#: relative to the size of its terms' scale 1 + |c|, before the data count as outside.
+BOUNDARY_TOLERANCE = 1e-9
+
+
+def check_boundary_data(model, path: Path, p, h: float) -> None:
+    """Raise ValueError naming the end, the element and the inequality when a fixed
+    element of the boundary data (elements 0 … r−2 and N−r+1 … N−1, between fixed
+    nodes) violates a control-free inequality — a coordinate's or a rate's bound, a
+    keep-out zone — evaluated on that element by the first-order rule (the ``boundary``
+    kernel): no path from such ends satisfies the bounds where they start, and the
+    interior point would only stall on them."""
+    names = model.info.get("boundary_inequalities", ())
+    if not names:
+        return
+    r, N = model.order, path.f.shape[0]
+    for end, elements in (("start", range(0, r - 1)), ("end", range(N - r + 1, N))):
+        for e in elements:
+            c = model.along_vector("boundary", path.x[e:e + 2], path.f[e:e + 1], h, p)[0]
+            k = int(np.argmax(c))
+            if c[k] > BOUNDARY_TOLERANCE * (1.0 + abs(c[k])):
+                raise ValueError(
+                    f"{end}: the fixed element {e} (nodes {e} and {e + 1}) lies outside the "
+                    f"bounds: {names[k]!r} is violated by {c[k]:.3g} on it (first-order rule); "
+                    f"boundary data must satisfy the inequalities that involve no control")
+
+
 def boundary_step(values: np.ndarray, step: np.ndarray, tau: float) -> float:
     """The largest α ≤ 1 with values + α·step ≥ (1 − τ)·values (values > 0): the
     fraction-to-the-boundary rule."""

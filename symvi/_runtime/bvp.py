@@ -18,6 +18,7 @@ import numpy as np
 from . import arguments
 from .assembly import Problem
 from .band import cholesky_pivot, product
+from .barrier import check_boundary_data
 from .gauge import check_boundary
 from .horizon import free_horizon
 from .interior import bounded
@@ -109,6 +110,7 @@ def _fixed_horizon(model, start, end, N: int, h: float, p, guess, maxiter: int,
         return path
     problem = Problem(model, p, h)
     if model.inequalities:
+        check_boundary_data(model, path, p, h)
         return bounded(model, problem, path, maxiter, xtol,
                        None if isinstance(guess, BVPResult) else _unbounded)
     if model.info.get("gauges"):

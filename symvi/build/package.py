@@ -68,6 +68,7 @@ def info(dm: DerivedModel, key: str, description: str) -> dict:
         "node_pairs": dm.node_pairs,
         "whole_trajectory": dm.whole_trajectory, "constraints": dm.constraint_count,
         "controls": dm.control_count, "inequalities": list(dm.inequality_names),
+        "boundary_inequalities": list(dm.boundary_names),
         "free_horizon": any(k.name == "horizon" for k in dm.kernels),
         "step_scaled": list(dm.step_scaled),
         "symmetries": list(dm.symmetries), "gauges": list(dm.gauges),

@@ -77,6 +77,13 @@ class ControlSystem:
         the rule's ``average`` (:func:`symvi.declaration.inequalities.discrete`)."""
         return discrete(self.bounds, self.path_inequalities, self.controls, controls, average)
 
+    def state_inequalities(self, average) -> tuple[tuple[str, sp.Expr], ...]:
+        """The named path inequalities that involve no control (bounds on coordinates,
+        keep-out zones), each averaged by ``average`` over one element: what fixed
+        boundary elements must satisfy (no control is defined there)."""
+        return tuple((name, average(g)) for name, g in self.path_inequalities
+                     if not g.free_symbols & set(self.controls))
+
 
 def euler_lagrange_operator(algebroid: Algebroid, lagrangian: sp.Expr) -> sp.Matrix:
     """EL(L) of a Lagrangian L(q, y) on ``algebroid`` (paper Appendix C.2), an n-vector in

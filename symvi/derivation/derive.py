@@ -82,6 +82,8 @@ class DerivedModel:
     control_count: int = 0
     #: The inequalities c ≤ 0 per window (their count is the ``inequality`` kernel's rows).
     inequality_names: tuple[str, ...] = ()
+    #: The control-free inequalities on one element (the ``boundary`` kernel's rows).
+    boundary_names: tuple[str, ...] = ()
     #: Per fibre coordinate: an increment divided by h (a group factor's ξ).
     step_scaled: tuple[bool, ...] = ()
     #: Names of the conserved quantities F_Z of the ``noether`` kernel.
@@ -266,6 +268,14 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
                 name, window.z, (("value", values), ("jacobian", window.total_jacobian(values))),
                 f"{what} on one window and their Jacobian",
                 window.definitions + window.jacobian_definitions))
+    if dm.boundary_inequalities:
+        (x, f), = dm.slots[:1]
+        on_one = dict(zip(x, one.xs[0])) | dict(zip(f, one.fs[0]))
+        kernels.append(Kernel(
+            "boundary", one.z,
+            (("value", sp.Matrix([c.xreplace(on_one) for c in dm.boundary_inequalities])),),
+            "the inequalities without controls on one element (first-order rule): the "
+            "check of the fixed boundary elements"))
     if sources:
         kernels += _lifted_kernels(dm, engine, window, one)
     if dm.gauges:
@@ -564,6 +574,7 @@ def _derive(dm: DiscreteModel) -> DerivedModel:
                         node_pairs=g.elements_are_node_pairs,
                         constraint_count=len(dm.constraints), control_count=len(dm.controls),
                         inequality_names=dm.inequality_names,
+                        boundary_names=dm.boundary_names,
                         step_scaled=tuple(g.step_scaled()),
                         symmetries=tuple(z.name for z in dm.symmetries)
                         if any(k.name == "noether" for k in kernels) else (),

@@ -56,6 +56,11 @@ class DiscreteModel:
     inequality_multipliers: tuple[sp.Symbol, ...] = ()
     #: ρ of a free horizon (cost + ρ·T), or None (:mod:`symvi.declaration.control`).
     time_cost: sp.Expr | None = None
+    #: The inequalities that involve no control, on one element (the first slot's
+    #: coordinates) by the groupoid's first first-order rule, and their names: checked
+    #: on the fixed elements of the boundary data.
+    boundary_inequalities: tuple[sp.Expr, ...] = ()
+    boundary_names: tuple[str, ...] = ()
 
     @property
     def window_multipliers(self) -> tuple[sp.Symbol, ...]:
@@ -99,6 +104,7 @@ def discretise(model: "Model") -> DiscreteModel:
     multipliers = tuple(sp.Dummy(f"lambda{a}", real=True) for a in range(len(constraints)))
     named = () if system is None else system.inequalities(
         controls, lambda F: rule.average(g, F, xs, fs, h))
+    boundary = () if system is None else _on_one_element(model, system, xs[0], fs[0])
     return DiscreteModel(name=model.name, groupoid=g, order=model.order, slots=slots,
                          lagrangian=Ld, step=h, parameters=model.parameter_symbols,
                          defaults=model.parameter_defaults,
@@ -110,7 +116,20 @@ def discretise(model: "Model") -> DiscreteModel:
                          inequality_names=tuple(n for n, _ in named),
                          inequality_multipliers=tuple(sp.Dummy(f"z{a}", real=True)
                                                       for a in range(len(named))),
-                         time_cost=None if system is None else system.time_cost)
+                         time_cost=None if system is None else system.time_cost,
+                         boundary_inequalities=tuple(c for _, c in boundary),
+                         boundary_names=tuple(n for n, _ in boundary))
+
+
+def _on_one_element(model: "Model", system, x, f) -> tuple[tuple[str, sp.Expr], ...]:
+    """The control-free inequalities on the element (x, f) by the groupoid's first
+    first-order rule (the midpoint on the pair groupoid, ξ on a Lie group), those that
+    it expresses in (x, f) and the parameters alone (not, say, one in q̈)."""
+    g = model.groupoid
+    first = g.rules(1)[0]
+    known = set(x) | set(f) | set(model.parameter_symbols) | {h}
+    return tuple((name, c) for name, c in system.state_inequalities(
+        lambda F: first.average(g, F, [x], [f], h)) if c.free_symbols <= known)
 
 
 def node_variation(groupoid: Groupoid, lagrangian: sp.Expr, rule: Rule, xs, fs) -> sp.Matrix:
