@@ -1,6 +1,6 @@
-"""The torque-limited slews of issue 21 with plots: controls against their bounds, angular
-velocity and the bound multipliers, beside the slew without limits; and the
-near-minimum-time slew.
+"""The bounded optimal-control problems of issue 21 with plots: controls against their
+bounds, states and the bound multipliers, beside the problems without limits; the
+near-minimum-time slew; the cart-pole swing-up with force and track limits.
 
 ``spacecraft_slew`` (rest to rest through a quarter turn about (1,1,1)/√3 in T = 1,
 I = diag(1, 2, 3), N = 1000) is solved for τ_max = 11 and 13 and, for comparison, for
@@ -9,7 +9,9 @@ and writes ``spacecraft_slew.png`` into the output directory (default ``paper_fi
 torques τ_k per window with ±τ_max, Ω_k, and the multipliers z_k/h of the active
 bounds (per unit time, so they do not scale with N); and ``minimum_time_slew.png``: the torques
 of the free-horizon slew (min ½∫|τ/I|² + 100·T) for τ_max = 11 and 16 over their optimal
-horizons. Needs matplotlib (``pip install '.[plots]'``).
+horizons; and ``cart_pole_swing_up.png``: the swing-up's force against ±u_max, the
+cart against its track ±d, the pole angle and the multipliers, beside the swing-up without
+limits. Needs matplotlib (``pip install '.[plots]'``).
 
 Run from the repository root: ``python scripts/plot_bounded_oc.py [-o DIR]``.
 """
@@ -70,6 +72,7 @@ def main() -> None:
            out / f"{NAME}.png")
     print(f"wrote {out / f'{NAME}.png'}")
     plot_minimum_time(out, plt)
+    plot_swing_up(out, plt)
 
 
 def plot_minimum_time(out: Path, plt) -> None:
@@ -91,6 +94,44 @@ def plot_minimum_time(out: Path, plt) -> None:
             ax.set_ylabel(f"τ{i + 1}")
     finish(fig, list(axes), f"{name}: min ½∫|τ/I|² + 100·T, free horizon, N = {steps}",
            out / f"{name}.png")
+    print(f"wrote {out / f'{name}.png'}")
+
+
+def plot_swing_up(out: Path, plt) -> None:
+    """The cart-pole swing-up with force and track limits beside the one without: the
+    force against ±u_max, the cart against ±d, the pole angle, and the multipliers of
+    the force bounds and of the track bound (per unit time), and the pole equation's λ."""
+    name = "cart_pole_swing_up"
+    model = get(name)
+    ex, steps = model.example, model.example.n_steps
+    module = compile_model(model, out / "generated")
+    limits = {"u_max = 14, d = 0.8": dict(u_max=14.0, d=0.8),
+              "no limits": dict(u_max=100.0, d=100.0)}
+    fig, axes = plt.subplots(5, 1, figsize=(8, 11), sharex=True)
+    for (label, params), colour in zip(limits.items(), ("C0", "0.5")):
+        r = module.solve_bvp(ex.start, ex.end, steps, ex.h, params=params)
+        r.raise_for_status()
+        print(f"{name}, {label}: cost {r.cost:.10g}, {r.iterations} iterations, "
+              f"max |u| {abs(r.controls).max():.4g}, max |x| {abs(r.x[:, 0]).max():.4g}")
+        t = midpoints(r.t)
+        axes[0].plot(t, r.controls[:, 0], color=colour, label=label)
+        axes[1].plot(r.t, r.x[:, 0], color=colour, label=label)
+        axes[2].plot(r.t, r.x[:, 1], color=colour, label=label)
+        axes[4].plot(t, r.multipliers[:, 0], color=colour, label=f"{label}: λ")
+        if colour == "C0":
+            z = r.bound_multipliers / ex.h
+            axes[3].plot(t, z[:, 0] - z[:, 1], color="C0", label="force: z₊ − z₋")
+            axes[3].plot(t, z[:, 2] - z[:, 3], color="C3", label="track: z₊ − z₋")
+            for ax, bound in ((axes[0], params["u_max"]), (axes[1], params["d"])):
+                for sign in (1, -1):
+                    ax.axhline(sign * bound, color="C0", ls=":", lw=0.8)
+    for ax, what in zip(axes, ("force u", "cart x", "pole angle θ", "bound multipliers / h",
+                               "pole equation's multiplier")):
+        ax.set_ylabel(what)
+    # the track bound's multiplier is an impulse where the cart touches the end (a
+    # second-order state constraint); the force bound's is two orders smaller
+    axes[3].set_yscale("symlog", linthresh=1.0)
+    finish(fig, list(axes), f"{name}: swing-up, min ½∫u², N = {steps}", out / f"{name}.png")
     print(f"wrote {out / f'{name}.png'}")
 
 
