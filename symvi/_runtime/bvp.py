@@ -24,6 +24,7 @@ from .horizon import free_horizon
 from .interior import bounded
 from .globalisation import descent_step, line_search, natural_step
 from .optimality import second_order
+from .penalty import nearly_feasible
 from .paths import Path, initial_path
 from .results import BVPResult, Status
 from .storage import check_path_memory as check_memory
@@ -111,8 +112,9 @@ def _fixed_horizon(model, start, end, N: int, h: float, p, guess, maxiter: int,
     problem = Problem(model, p, h)
     if model.inequalities:
         check_boundary_data(model, path, p, h)
-        return bounded(model, problem, path, maxiter, xtol,
-                       None if isinstance(guess, BVPResult) else _unbounded)
+        cold = not isinstance(guess, BVPResult)
+        return bounded(model, problem, path, maxiter, xtol, _unbounded if cold else None,
+                       _nearly_feasible)
     if model.info.get("gauges"):
         check_boundary(model, path, problem.perturbed(path), p, h)
     path, norms, steps, status, message = _newton(problem, path, maxiter, xtol, ftol)
@@ -140,6 +142,11 @@ def _unbounded(problem: Problem, path: Path, maxiter: int, xtol: float):
     solved, _, steps, status, _ = _newton(problem, path.copy(), maxiter, xtol, 0.0)
     problem.shift, problem.penalty, problem.convex = 0.0, 0.0, False
     return (solved if status == Status.SUCCESS else None), len(steps)
+
+
+def _nearly_feasible(problem: Problem, optimum: Path, maxiter: int, xtol: float):
+    """:func:`.penalty.nearly_feasible` with this module's Newton iteration."""
+    return nearly_feasible(problem, optimum, _newton, maxiter, xtol)
 
 
 def _minimum(problem: Problem, path: Path, message: str) -> tuple[Status, str]:

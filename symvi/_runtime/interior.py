@@ -322,8 +322,8 @@ class InteriorPoint:
             history={k: np.array(v) for k, v in self.history.items()})
 
 
-def bounded(model, problem, path: Path, maxiter: int, xtol: float,
-            unbounded=None) -> BVPResult:
+def bounded(model, problem, path: Path, maxiter: int, xtol: float, unbounded=None,
+            nearly_feasible=None) -> BVPResult:
     """The interior-point solve of :func:`.bvp.solve_bvp` for a model with inequalities:
     its result, SUCCESS only at a verified minimum within the tolerance (module
     docstring).
@@ -331,21 +331,51 @@ def bounded(model, problem, path: Path, maxiter: int, xtol: float,
     ``unbounded(problem, path, maxiter, xtol)`` → (optimum or None, iterations), where
     given (a cold start), first solves the problem without inequalities from the guess;
     the interior-point iteration starts from that optimum where it exists (from the
-    guess otherwise), and the result counts both solves' iterations. The equality solver's
-    globalisation is the better tested of the two far from a solution: from perturbed
-    guesses whose torques exceed the bounds 400-fold, the interior-point steps were cut
-    to α ≈ 10⁻² by the fraction-to-the-boundary rule and stalled; from the unbounded
-    optimum it needs 20–30 iterations.
+    guess otherwise), and the result counts every solve's iterations. The equality
+    solver's globalisation is the better tested of the two far from a solution: from
+    perturbed guesses whose torques exceed the bounds 400-fold, the interior-point steps
+    were cut to α ≈ 10⁻² by the fraction-to-the-boundary rule and stalled; from the
+    unbounded optimum it needs 20–30 iterations. Where the interior point then stalls or
+    runs out of iterations, ``nearly_feasible(problem, optimum, maxiter, xtol)`` →
+    (start, iterations, stages) moves that optimum toward the bounds by a quadratic
+    penalty (:mod:`.penalty`) and the interior point starts again from there — a retry,
+    not the first choice: on the cart-pole swing-up the penalised start is the worse one
+    (MAX_ITERATIONS at N = 60, against SUCCESS in 33 iterations from the optimum).
     """
-    start, first = unbounded(problem, path, maxiter, xtol) if unbounded is not None \
+    optimum, first = unbounded(problem, path, maxiter, xtol) if unbounded is not None \
         else (None, 0)
-    phase = (f"from the optimum without bounds ({first} Newton iterations), "
-             if start is not None else "")
-    path = start if start is not None else path
+    phase = f"from the optimum without bounds ({first} Newton iterations), " \
+        if optimum is not None else ""
+    # a copy: the interior point sets the bound multipliers of the path it starts from
+    ip, end, iterations, status, message = _interior(
+        problem, optimum.copy() if optimum is not None else path, maxiter, xtol)
+    total = first + iterations
+    if status in (Status.STALLED, Status.MAX_ITERATIONS) and optimum is not None \
+            and nearly_feasible is not None:
+        start, more, stages = nearly_feasible(problem, optimum, maxiter, xtol)
+        if stages:
+            retry = _interior(problem, start, maxiter, xtol)
+            total += more + retry[2]
+            # kept unless it failed the same way: a SUCCESS, or an ILL_CONDITIONED
+            # that states the accuracy reached, says more than the first stall
+            if retry[3] not in (Status.STALLED, Status.MAX_ITERATIONS):
+                ip, end, iterations, status, message = retry
+                before = total - iterations
+                phase = (f"after an interior point from the optimum without bounds "
+                         f"failed, from that optimum moved toward the bounds by "
+                         f"{stages} penalty stage{'s' if stages > 1 else ''} ({before} "
+                         f"iterations before), ")
+    if status == Status.SUCCESS:
+        message = f"{phase}interior point converged in {iterations} iterations{message}"
+    return ip.result(end, total, status, message)
+
+
+def _interior(problem, path: Path, maxiter: int, xtol: float):
+    """(InteriorPoint, path, iterations, status, message) of the interior-point
+    iteration from ``path``, the minimum test applied to a converged one."""
+    problem.shift, problem.penalty, problem.convex = 0.0, 0.0, False
     ip = InteriorPoint(problem, path, xtol)
     path, iterations, status, message = ip.solve(path, maxiter)
     if status == Status.SUCCESS:
         status, message = ip.minimum(path, message)
-        message = f"{phase}interior point converged in {iterations} iterations{message}" \
-            if status == Status.SUCCESS else message
-    return ip.result(path, first + iterations, status, message)
+    return ip, path, iterations, status, message
