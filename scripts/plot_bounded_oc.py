@@ -11,7 +11,8 @@ bounds (per unit time, so they do not scale with N); and ``minimum_time_slew.png
 of the free-horizon slew (min ½∫|τ/I|² + 100·T) for τ_max = 11 and 16 over their optimal
 horizons; and ``cart_pole_swing_up.png``: the swing-up's force against ±u_max, the
 cart against its track ±d, the pole angle and the multipliers, beside the swing-up without
-limits. Needs matplotlib (``pip install '.[plots]'``).
+limits; and ``planar_flyer.png``: the flyer's path around the keep-out disc with its
+heading, and its controls, for two disc radii. Needs matplotlib (``pip install '.[plots]'``).
 
 Run from the repository root: ``python scripts/plot_bounded_oc.py [-o DIR]``.
 """
@@ -73,6 +74,7 @@ def main() -> None:
     print(f"wrote {out / f'{NAME}.png'}")
     plot_minimum_time(out, plt)
     plot_swing_up(out, plt)
+    plot_flyer(out, plt)
 
 
 def plot_minimum_time(out: Path, plt) -> None:
@@ -132,6 +134,46 @@ def plot_swing_up(out: Path, plt) -> None:
     # second-order state constraint); the force bound's is two orders smaller
     axes[3].set_yscale("symlog", linthresh=1.0)
     finish(fig, list(axes), f"{name}: swing-up, min ½∫u², N = {steps}", out / f"{name}.png")
+    print(f"wrote {out / f'{name}.png'}")
+
+
+def plot_flyer(out: Path, plt) -> None:
+    """The planar flyer's path around the keep-out disc, with its heading every few
+    steps, and its controls (the main thrust against its lower bound 0), for the
+    example's disc (r = 0.7) and a smaller one (r = 0.4)."""
+    from symvi.models.planar_flyer import CENTRE
+
+    name = "planar_flyer"
+    model = get(name)
+    ex, steps = model.example, model.example.n_steps
+    module = compile_model(model, out / "generated")
+    fig = plt.figure(figsize=(11, 7))
+    path_ax = fig.add_subplot(1, 2, 1)
+    control_axes = [fig.add_subplot(3, 2, 2 * i + 2) for i in range(3)]
+    for radius, colour in ((0.7, "C0"), (0.4, "C1")):
+        r = module.solve_bvp(ex.start, ex.end, steps, ex.h, params=dict(r=radius))
+        r.raise_for_status()
+        print(f"{name}, r = {radius}: cost {r.cost:.10g}, {r.iterations} iterations, main "
+              f"thrust at its bound 0 on {int(r.active[:, 3].sum())} of {len(r.active)} "
+              f"windows")
+        label = f"disc r = {radius}"
+        path_ax.add_patch(plt.Circle(CENTRE, radius, color=colour, alpha=0.15))
+        xy, heading = r.g[:, :2, 2], r.g[:, :2, 0]
+        path_ax.plot(xy[:, 0], xy[:, 1], color=colour, label=label)
+        every = slice(0, None, max(1, steps // 20))
+        path_ax.quiver(xy[every, 0], xy[every, 1], heading[every, 0], heading[every, 1],
+                       color=colour, scale=25, width=0.004)
+        for ax, u in zip(control_axes, r.controls.T):
+            ax.plot(midpoints(r.t), u, color=colour, label=label)
+    path_ax.set_aspect("equal")
+    path_ax.set_xlabel("x")
+    path_ax.set_ylabel("y (arrows: heading)")
+    path_ax.legend(fontsize=8)
+    control_axes[1].axhline(0.0, color="k", ls=":", lw=0.8)
+    for ax, what in zip(control_axes, ("torque τ", "main thrust f₁ ≥ 0", "side thrust f₂")):
+        ax.set_ylabel(what)
+    finish(fig, control_axes, f"{name}: rest to rest around a keep-out disc, forward-only "
+           f"main thruster, N = {steps}", out / f"{name}.png")
     print(f"wrote {out / f'{name}.png'}")
 
 
