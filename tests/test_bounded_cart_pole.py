@@ -158,3 +158,25 @@ def test_boundary_data_outside_the_bounds_are_refused(cart_pole, start, end, mes
     end = ex.end if end is None else np.array(end)
     with pytest.raises(ValueError, match=message):
         module.solve_bvp(start, end, 100, T / 100)
+
+
+def test_unbounded_equations_hold_where_no_bound_is_active(cart_pole):
+    """The variational oracle of ``test_optimal_control`` on the augmented action
+    S + λ·Φ_d (the bound terms z·c left out): stationary at every free node whose three
+    windows have no active bound — there the swing-up satisfies the discrete equations
+    of the problem without bounds — and not at the nodes an active bound touches."""
+    from test_optimal_control import N_ORACLE, TOL_ORACLE, oracle
+
+    model, module = cart_pole
+    h = T / N_ORACLE
+    r = module.solve_bvp(model.example.start, model.example.end, N_ORACLE, h)
+    assert r.success, r.message
+    nodes = np.arange(2, N_ORACLE - 1)
+    touched = np.array([r.active[j - 2:j + 1].any() for j in nodes])
+    rel, noise = oracle("cart_pole_oc", module, r.x, None, r.f, r.multipliers, h, nodes)
+    print(f"\nrelative gradient of S + λ·Φ_d ≤ {rel[~touched].max():.1e} at "
+          f"{(~touched).sum()} free nodes, ≥ {rel[touched].min():.1e} at the {touched.sum()} "
+          f"nodes an active bound touches (noise {noise.max():.1e})")
+    assert touched.any() and (~touched).any()
+    assert rel[~touched].max() < TOL_ORACLE
+    assert rel[touched].min() > 1e3 * TOL_ORACLE

@@ -167,3 +167,48 @@ def test_converges_from_every_guess_by_way_of_the_penalty(flyer, N):
     values = np.array(list(costs.values()))
     print(f"\nN={N}: {len(values)} of {len(guesses)} at cost {values.min():.12g}")
     np.testing.assert_allclose(values, values[0], rtol=1e-9)
+
+
+def test_unbounded_equations_hold_where_no_bound_is_active(flyer):
+    """The variational oracle on the cost S = Σ L_d, with the flyer's own node variation
+    g_j → g_j cay(εE_a) (the disc's centre seen from node j moves as cay(εE_a)⁻¹·c_j):
+    S is stationary at every free node whose three windows have no active bound, and not
+    at the nodes an active bound touches (five-point differences, as
+    ``test_optimal_control.oracle``)."""
+    from test_optimal_control import EPS_FD, TOL_ORACLE
+
+    model, N = get(NAME), 60
+    h = T / N
+    r = flyer.solve_bvp(model.example.start, model.example.end, N, h)
+    assert r.success, r.message
+    basis = hat(np.eye(3))
+
+    def cost_terms(x, g):
+        W = np.linalg.solve(g[:-1], g[1:])
+        f = cay_inv_vee(W) / h
+        return flyer.model.along("lagrangian", x, f, h)[:, 0]
+
+    def varied(j, a, eps):
+        sigma = cay(eps * basis[a])
+        g, x = r.g.copy(), r.x.copy()
+        g[j] = g[j] @ sigma
+        x[j] = np.linalg.solve(sigma, np.r_[x[j], 1.0])[:2]
+        return cost_terms(x, g)
+
+    nodes = np.arange(2, N - 1)
+    touched = np.array([r.active[j - 2:j + 1].any() for j in nodes])
+    rel = []
+    for j in nodes:
+        worst = 0.0
+        for a in range(3):
+            T_ = {s: varied(j, a, s * EPS_FD) for s in (-2, -1, 1, 2)}
+            d = (-T_[2] + 8 * T_[1] - 8 * T_[-1] + T_[-2]) / (12 * EPS_FD)
+            worst = max(worst, abs(d.sum()) / np.abs(d).sum())
+        rel.append(worst)
+    rel = np.array(rel)
+    print(f"\nrelative gradient of S ≤ {rel[~touched].max():.1e} at {(~touched).sum()} free "
+          f"nodes, ≥ {rel[touched].min():.1e} at the {touched.sum()} nodes an active bound "
+          f"touches")
+    assert touched.any() and (~touched).any()
+    assert rel[~touched].max() < TOL_ORACLE
+    assert rel[touched].min() > 1e3 * TOL_ORACLE
