@@ -12,6 +12,8 @@ from that optimum moved toward the bounds by a quadratic penalty (``_runtime/pen
 """
 from __future__ import annotations
 
+import re
+
 import numpy as np
 import pytest
 
@@ -146,26 +148,38 @@ def test_same_optimum_as_slsqp_and_kkt(flyer):
 
 @pytest.mark.parametrize("N", [100, 200])
 def test_converges_from_every_guess_by_way_of_the_penalty(flyer, N):
-    """From the cubic, chord and zero guesses and ten perturbations: every solve a SUCCESS
-    at one minimum (cost to 1e-9). At N = 200 the interior point from the optimum without
-    bounds stalls and the retry from the penalised start succeeds (the message says so);
-    without that retry every one of these solves STALLED. maxiter = 200: the penalty
-    stages take up to about 100 Newton iterations each (with 100, one perturbed start
-    of 13 at N = 200 stalls)."""
+    """From the cubic, chord and zero guesses and ten perturbations: every SUCCESS at one
+    minimum (cost to 1e-9), its correction plus rounding floor within the tolerance as
+    its message states. N = 100: all 13. N = 200: the interior point from the optimum
+    without bounds stalls and the retry from the penalised start succeeds (the message
+    says so; without that retry every one of these solves STALLED); 10 of 13 succeed and
+    three (the zero guess, two perturbations) end ILL_CONDITIONED with about 3e-9
+    attainable against 3.0e-9 asked: corrections within the tolerance, but not with their
+    rounding floor (the rule that a lucky 2.4e-9 over a floor of 3.0e-9 once passed).
+    maxiter = 200: the penalty stages take up to about 100 Newton iterations each."""
     import battery
 
     model = get(NAME)
     ex, h = model.example, T / N
     guesses = {"cubic": None} | battery.guesses(flyer, NAME, N, count=10)
-    costs = {}
+    costs, others = {}, {}
     for label, guess in guesses.items():
         r = flyer.solve_bvp(ex.start, ex.end, N, h, guess=guess, maxiter=200)
-        assert r.success, (label, r.message)
+        if not r.success:
+            assert r.status.name == "ILL_CONDITIONED" and "attainable" in r.message, r.message
+            others[label] = r.status.name
+            continue
+        found = re.search(r"\(μ = 0\) ([0-9.e+-]+), rounding floor ([0-9.e+-]+), within "
+                          r"xtol·\(1 \+ size\) = ([0-9.e+-]+)", r.message)
+        assert found, r.message
+        correction, floor, tolerance = map(float, found.groups())
+        assert correction + floor <= tolerance * (1 + 1e-2), r.message   # 2-digit print
         costs[label] = r.cost
         if N == 200 and label == "cubic":
             assert "penalty stages" in r.message, r.message
     values = np.array(list(costs.values()))
-    print(f"\nN={N}: {len(values)} of {len(guesses)} at cost {values.min():.12g}")
+    print(f"\nN={N}: {len(values)} of {len(guesses)} at cost {values.min():.12g}; {others}")
+    assert "cubic" in costs and len(costs) >= (13 if N == 100 else 10)
     np.testing.assert_allclose(values, values[0], rtol=1e-9)
 
 
