@@ -25,8 +25,8 @@ import numpy as np
 import pytest
 
 from symvi.models import get
-from test_bounded_oc import bounded_minimum
-from test_independent_optimum import CartPole, pair_point, perturb
+from test_bounded_oc import assert_same_optimum_as_slsqp
+from test_independent_optimum import CartPole, pair_point
 
 NAME, T, N_EXAMPLE, N_SLSQP = "cart_pole_swing_up", 2.5, 250, 60
 
@@ -79,15 +79,7 @@ def test_same_optimum_as_slsqp_with_both_limits_active(cart_pole):
     names = {n for window in r.active_set for n in window}
     assert names == {"x <= d", "u >= -u_max"}, names
 
-    z0 = perturb(prob, z, 0.05, seed=2026)
-    res, z_opt = bounded_minimum(prob, z0)
-    assert res.success, res.message
-    assert prob.slack(z_opt).min() >= -1e-9 and np.abs(prob.phi(z_opt)).max() <= 1e-9
-    rel = (prob.cost(z_opt) - r.cost) / r.cost
-    print(f"\nN={N_SLSQP}: symvi J={r.cost:.14g} in {r.iterations} iterations, SLSQP "
-          f"J={prob.cost(z_opt):.14g} ({res.nit} iterations), rel {rel:.1e}")
-    assert abs(rel) <= 1e-8
-    np.testing.assert_array_equal(r.active, prob.values(z_opt) > -1e-6)
+    assert_same_optimum_as_slsqp(prob, z, r, 2026, prob.phi)
 
 
 def test_every_limit_pair_is_solved_and_the_cost_falls_as_limits_loosen(cart_pole):

@@ -19,8 +19,7 @@ import pytest
 
 from symvi.models import get
 from symvi.models.planar_flyer import CENTRE, T
-from test_bounded_oc import bounded_minimum
-from test_independent_optimum import perturb
+from test_bounded_oc import assert_same_optimum_as_slsqp
 
 NAME, N_SLSQP = "planar_flyer", 40
 
@@ -134,16 +133,7 @@ def test_same_optimum_as_slsqp_and_kkt(flyer):
     assert r.active[:, 3].any() and r.active[:, 6].any(), "thrust and disc should bind"
     np.testing.assert_array_equal(r.active, c > -1e-6)
 
-    z0 = perturb(prob, z, 0.05, seed=7)
-    res, z_opt = bounded_minimum(prob, z0)
-    assert res.success, res.message
-    assert prob.slack(z_opt).min() >= -1e-9 and np.abs(prob.constraints(z_opt)).max() <= 1e-9
-    rel = (prob.cost(z_opt) - r.cost) / r.cost
-    print(f"\nN={N_SLSQP}: symvi J={r.cost:.14g} in {r.iterations} iterations, SLSQP "
-          f"J={prob.cost(z_opt):.14g} ({res.nit} iterations), rel {rel:.1e}, active "
-          f"{r.active.sum(axis=0)}")
-    assert abs(rel) <= 1e-8
-    np.testing.assert_array_equal(r.active, prob.values(z_opt) > -1e-6)
+    assert_same_optimum_as_slsqp(prob, z, r, 7, prob.constraints)
 
 
 @pytest.mark.parametrize("N", [100, 200])

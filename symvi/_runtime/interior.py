@@ -100,13 +100,14 @@ class InteriorPoint:
         """Gᵀ(μ/s) in the block layout: what the barrier adds to the reduced residual."""
         return self.inequalities.transposed(mu / self.s, self.blocks, self.width)
 
-    def kkt_correction(self, ab, bw: int, res: np.ndarray, path: Path) -> float:
-        """‖(Δη, Δλ, Δz)‖∞ of the full Newton correction of the unperturbed KKT system
-        (μ = 0, s_j z_j = 0) at ``path``, from the reduced system's factorisation: the
-        first-order estimate of the distance to its KKT point, barrier's bias included.
-        Not Δs, which is Δη's noise amplified by G (:meth:`_barrier_error`)."""
+    def kkt_correction(self, ab, bw: int, res: np.ndarray, path: Path) -> np.ndarray:
+        """(Δη, Δλ, Δz) of the full Newton correction of the unperturbed KKT system
+        (μ = 0, s_j z_j = 0) at ``path``, from the reduced system (``res``, ``ab``)
+        assembled there at the current μ: its ∞-norm is the first-order estimate of the
+        distance to the KKT point, barrier's bias included. Not Δs, which is Δη's noise
+        amplified by G (:meth:`_barrier_error`)."""
         delta = self.problem.solve(ab, bw, -(res - self.barrier_rhs(self.mu * self.problem.h)))
-        return self._barrier_error(delta, self.steps(delta, path, 0.0)[1])
+        return np.concatenate([delta, self.steps(delta, path, 0.0)[1].ravel()])
 
     # -- the iteration -------------------------------------------------------------------
     def solve(self, path: Path, maxiter: int):
@@ -165,19 +166,21 @@ class InteriorPoint:
             delta = self.problem.solve(ab, bw, -res)
             ds, dz, Gd = self.steps(delta, path, self.mu * h)
             error = self._barrier_error(delta, dz)
-            correction = self.kkt_correction(ab, bw, res, path)
+            kkt = self.kkt_correction(ab, bw, res, path)
+            correction = float(np.abs(kkt).max(initial=0.0))
             self.corrections.append(max(error, correction))
             if max(error, correction) < self.best[0]:
                 self.best = (max(error, correction), path, self.s.copy())
             if max(error, correction) <= tolerance:
-                floor = self.rounding_floor(path, ab, bw, res)
+                floor = self.rounding_floor(path, kkt, ab.shape[1])
                 if max(error, correction) + floor <= tolerance:
                     return path, Status.SUCCESS, (
                         f"; Newton correction of the KKT system (μ = 0) {correction:.1e}, "
                         f"rounding floor {floor:.1e}, within xtol·(1 + size) = "
                         f"{tolerance:.1e} (barrier parameter {self.mu:.1e}), "
                         f"{self._last_errors()}")
-                # small by luck against the noise: judged as that sum, and on
+                # small by luck against the noise: judged as that sum, and on (from the
+                # system at path again: the floor assembled another in its place)
                 self.corrections[-1] += floor
                 if self.best[1] is path:
                     self.best = (self.corrections[-1], path, self.best[2])
@@ -213,18 +216,18 @@ class InteriorPoint:
                 f"parameter {self.mu:.1e}, {self._last_errors()})")
         return moved, None, ""
 
-    def rounding_floor(self, path: Path, ab, bw: int, res: np.ndarray) -> float:
-        """‖·‖∞ of the change in the μ = 0 KKT correction (Δη, Δλ, Δz) when every
-        unknown — node, λ, z and slack — moves by one unit in the last place of its
-        magnitude in a fixed random direction: the noise under that correction, as the
-        equality solver's floor (:meth:`.assembly.Problem.rounding_correction`). A
-        correction within the tolerance by luck is caught by it: the planar flyer at
-        N = 200 met its tolerance 3.0e-9 with a correction of 2.4e-9 over a floor of
-        3.0e-9. The system at ``path`` is assembled again afterwards (into ``ab``)."""
+    def rounding_floor(self, path: Path, kkt: np.ndarray, size: int) -> float:
+        """‖·‖∞ of the change in the μ = 0 KKT correction ``kkt`` (:meth:`kkt_correction`
+        at ``path``; ``size`` unknowns in the reduced system) when every unknown — node,
+        λ, z and slack — moves by one unit in the last place of its magnitude in a fixed
+        random direction: the noise under that correction, as the equality solver's
+        floor (:meth:`.assembly.Problem.rounding_correction`). A correction within the
+        tolerance by luck is caught by it: the planar flyer at N = 200 met its tolerance
+        3.0e-9 with a correction of 2.4e-9 over a floor of 3.0e-9. The system of the
+        moved path takes the place of the one at ``path``."""
         problem, eps = self.problem, np.finfo(float).eps
         rng = np.random.default_rng(0)
-        base = self._kkt_vector(path, ab, bw, res)
-        rounded = problem.moved(path, eps * rng.choice((-1.0, 1.0), ab.shape[1])
+        rounded = problem.moved(path, eps * rng.choice((-1.0, 1.0), size)
                                 * problem.magnitudes(path), 1.0)
         if rounded is None:
             return np.inf
@@ -234,17 +237,10 @@ class InteriorPoint:
         try:
             system = self.system(rounded)
             other = None if system is None else \
-                self._kkt_vector(rounded, system[1], system[2], system[0])
+                self.kkt_correction(system[1], system[2], system[0], rounded)
         finally:
             self.s = s
-        self.system(path)
-        return np.inf if other is None else float(np.abs(other - base).max(initial=0.0))
-
-    def _kkt_vector(self, path: Path, ab, bw: int, res: np.ndarray) -> np.ndarray:
-        """(Δη, Δλ, Δz) of the μ = 0 KKT correction at ``path`` from the reduced system
-        (``res``, ``ab``) assembled there at the current μ."""
-        delta = self.problem.solve(ab, bw, -(res - self.barrier_rhs(self.mu * self.problem.h)))
-        return np.concatenate([delta, self.steps(delta, path, 0.0)[1].ravel()])
+        return np.inf if other is None else float(np.abs(other - kkt).max(initial=0.0))
 
     def _stagnant(self, tolerance: float) -> float | None:
         """The attainable accuracy where the KKT corrections of one barrier stage have

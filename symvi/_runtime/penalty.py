@@ -40,7 +40,7 @@ class PenalisedProblem(Problem):
     def assemble(self, path: Path, with_jacobian: bool):
         res, ab, bw, finite = super().assemble(path, with_jacobian)
         ineq = self.inequalities
-        finite = finite and ineq.evaluate(path, self.p, self.h, with_jacobian=True)
+        finite = finite and ineq.evaluate(path, self.p, self.h)   # add_barrier: G
         if finite:
             violated = np.ascontiguousarray(self.rho * (ineq.values > 0.0))
             finite = ineq.add_barrier(path, self.p, self.h, violated, np.ones_like(violated),

@@ -18,13 +18,14 @@ G = PairGroupoid("x theta")
 (x, th), (v, w) = G.q, G.qdot
 M, m, ell, g = sp.symbols("M m ell g", positive=True)
 u = sp.Symbol("u", real=True)
+#: The cart-pole's Lagrangian and parameters (shared with :mod:`.cart_pole_swing_up`).
+LAGRANGIAN = (M + m) * v**2 / 2 + m * ell * v * w * sp.cos(th) + m * ell**2 * w**2 / 2 \
+    - m * g * ell * sp.cos(th)
+PARAMETERS = {M: 1.0, m: 0.3, ell: 0.5, g: 9.81}
 
 model = optimal_control(
-    name="cart_pole_oc", groupoid=G,
-    lagrangian=(M + m) * v**2 / 2 + m * ell * v * w * sp.cos(th) + m * ell**2 * w**2 / 2
-    - m * g * ell * sp.cos(th),
-    cost=u**2 / 2, controls=[u], actuated=[0],
-    parameters={M: 1.0, m: 0.3, ell: 0.5, g: 9.81},
+    name="cart_pole_oc", groupoid=G, lagrangian=LAGRANGIAN,
+    cost=u**2 / 2, controls=[u], actuated=[0], parameters=PARAMETERS,
     example=Example(h=T / N, n_steps=N, start=np.zeros((2, 2)),
                     end=np.array([[1.0, 0.0]] * 2)),
     description="Optimal control of a cart-pole (force on the cart only): min ½∫u².")

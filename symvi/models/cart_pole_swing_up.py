@@ -19,21 +19,16 @@ N = 250, no limit active). From N ≈ 1000 on the solve does not converge yet (R
 import numpy as np
 import sympy as sp
 
-from symvi import Example, PairGroupoid, optimal_control
+from symvi import Example, optimal_control
+from symvi.models.cart_pole_oc import LAGRANGIAN, PARAMETERS, G, u, x
 
 T, N = 2.5, 250
-G = PairGroupoid("x theta")
-(x, th), (v, w) = G.q, G.qdot
-M, m, ell, g = sp.symbols("M m ell g", positive=True)
 u_max, d = sp.symbols("u_max d", positive=True)
-u = sp.Symbol("u", real=True)
 
 model = optimal_control(
-    name="cart_pole_swing_up", groupoid=G,
-    lagrangian=(M + m) * v**2 / 2 + m * ell * v * w * sp.cos(th) + m * ell**2 * w**2 / 2
-    - m * g * ell * sp.cos(th),
+    name="cart_pole_swing_up", groupoid=G, lagrangian=LAGRANGIAN,
     cost=u**2 / 2, controls=[u], actuated=[0],
-    parameters={M: 1.0, m: 0.3, ell: 0.5, g: 9.81, u_max: 14.0, d: 0.8},
+    parameters=PARAMETERS | {u_max: 14.0, d: 0.8},
     bounds={u: (-u_max, u_max), x: (-d, d)},
     example=Example(h=T / N, n_steps=N, start=np.array([[0.0, np.pi]] * 2),
                     end=np.zeros((2, 2))),
