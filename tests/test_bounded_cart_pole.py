@@ -135,6 +135,42 @@ def test_every_success_from_perturbed_guesses_is_a_feasible_minimum(cart_pole):
     assert len(minima) <= 2 and np.allclose(minima, [20.664623, 32.433644][-len(minima):])
 
 
+def test_a_force_limit_too_small_for_the_swing_up_is_infeasible(cart_pole):
+    """|u| ≤ 5 at N = 60: symvi says INFEASIBLE, naming the force bound, its violation
+    having stayed put as the penalty grew 10⁴-fold. Independently, SLSQP's epigraph
+    minimisation of the largest violation t over the same discrete dynamics (Φ = 0),
+    started at symvi's optimum without limits, stops at t > 0 — no swing-up with this
+    force near there — and symvi's least violation is not below that minimum."""
+    from scipy.optimize import minimize
+    from test_independent_optimum import cs_derivative
+
+    model, module = cart_pole
+    prob = BoundedSwingUp(model, N_SLSQP, 5.0, 0.8)
+    r = module.solve_bvp(*prob.boundary, N_SLSQP, prob.h, params=dict(u_max=5.0))
+    assert r.status.name == "INFEASIBLE" and not r.success, r.message
+    assert "'u >= -u_max' at window" in r.message or "'u <= u_max' at window" in r.message
+    stayed = [float(v) for v in r.message.split("stayed at ")[1].split(" as ")[0].split(", ")]
+    free = module.solve_bvp(*prob.boundary, N_SLSQP, prob.h, params=dict(u_max=1e3, d=1e3))
+    assert free.success, free.message
+
+    def ineq(v):
+        c = prob.values(v[..., :-1])
+        return v[..., -1:] - c.reshape(c.shape[:-2] + (-1,))
+
+    def eq(v):
+        return prob.constraints(v[..., :-1])
+
+    res = minimize(lambda v: v[-1], np.r_[prob.from_symvi(free), 20.0],
+                   jac=lambda v: np.eye(v.size)[-1], method="SLSQP",
+                   options=dict(maxiter=500, ftol=1e-10), constraints=[
+                       dict(type="eq", fun=eq, jac=lambda v: cs_derivative(eq, v)),
+                       dict(type="ineq", fun=ineq, jac=lambda v: cs_derivative(ineq, v))])
+    print(f"\nleast largest violation of |u| ≤ 5 (SLSQP epigraph): {res.x[-1]:.4f} "
+          f"({res.message}); symvi's penalised minimiser: {stayed}")
+    assert res.success and res.x[-1] > 1.0
+    assert stayed[-1] >= res.x[-1] - 1e-6 and min(stayed) > 0.5 * max(stayed)
+
+
 @pytest.mark.parametrize("start, end, message", [
     ([[0.9, np.pi]] * 2, None, r"start: the fixed element 0 \(nodes 0 and 1\) lies outside "
                                r"the bounds: 'x <= d' is violated by 0\.1 "),

@@ -24,7 +24,7 @@ from .horizon import free_horizon
 from .interior import bounded
 from .globalisation import descent_step, line_search, natural_step
 from .optimality import second_order
-from .penalty import nearly_feasible
+from .penalty import infeasibility, nearly_feasible
 from .paths import Path, initial_path
 from .results import BVPResult, Status
 from .storage import check_path_memory as check_memory
@@ -114,7 +114,7 @@ def _fixed_horizon(model, start, end, N: int, h: float, p, guess, maxiter: int,
         check_boundary_data(model, path, p, h)
         cold = not isinstance(guess, BVPResult)
         return bounded(model, problem, path, maxiter, xtol, _unbounded if cold else None,
-                       _nearly_feasible)
+                       _nearly_feasible, _infeasibility)
     if model.info.get("gauges"):
         check_boundary(model, path, problem.perturbed(path), p, h)
     path, norms, steps, status, message = _newton(problem, path, maxiter, xtol, ftol)
@@ -147,6 +147,11 @@ def _unbounded(problem: Problem, path: Path, maxiter: int, xtol: float):
 def _nearly_feasible(problem: Problem, optimum: Path, maxiter: int, xtol: float):
     """:func:`.penalty.nearly_feasible` with this module's Newton iteration."""
     return nearly_feasible(problem, optimum, _newton, maxiter, xtol)
+
+
+def _infeasibility(problem: Problem, start: Path, maxiter: int, xtol: float):
+    """:func:`.penalty.infeasibility` with this module's Newton iteration."""
+    return infeasibility(problem, start, _newton, maxiter, xtol)
 
 
 def _minimum(problem: Problem, path: Path, message: str) -> tuple[Status, str]:

@@ -32,6 +32,7 @@ from .barrier import Inequalities, next_barrier
 from .interior_steps import step
 from .optimality import Curvature, second_order
 from .paths import Path
+from .penalty import STAGES
 from .results import BVPResult, Status
 
 #: Initial barrier parameter (per unit time) and the factor on xtol of its floor.
@@ -44,6 +45,8 @@ STAGNATION = 6
 #: Penalties ρ (times W's scale over |∇c_j|²) on the active inequalities in the final
 #: second-order test, and the cap on Σ in the iteration's inertia test (×10⁶).
 PENALTIES, CAP = (0.0, 1.0, 1e2, 1e4, 1e6), 1e6
+#: The failures after which the interior point starts again (and then tests infeasibility).
+FAILED = (Status.STALLED, Status.MAX_ITERATIONS)
 
 
 class InteriorPoint:
@@ -362,7 +365,7 @@ class InteriorPoint:
 
 
 def bounded(model, problem, path: Path, maxiter: int, xtol: float, unbounded=None,
-            nearly_feasible=None) -> BVPResult:
+            nearly_feasible=None, infeasibility=None) -> BVPResult:
     """The interior-point solve of :func:`.bvp.solve_bvp` for a model with inequalities:
     its result, SUCCESS only at a verified minimum within the tolerance (module
     docstring).
@@ -379,7 +382,10 @@ def bounded(model, problem, path: Path, maxiter: int, xtol: float, unbounded=Non
     (start, iterations, stages) moves that optimum toward the bounds by a quadratic
     penalty (:mod:`.penalty`) and the interior point starts again from there — a retry,
     not the first choice: on the cart-pole swing-up the penalised start is the worse one
-    (MAX_ITERATIONS at N = 60, against SUCCESS in 33 iterations from the optimum).
+    (MAX_ITERATIONS at N = 60, against SUCCESS in 33 iterations from the optimum). Where
+    that fails the same way, ``infeasibility(problem, start, maxiter, xtol)`` →
+    (certificate or None, iterations) continues the penalty stages: a certificate
+    (:class:`.penalty.Infeasibility`) makes the result INFEASIBLE.
     """
     optimum, first = unbounded(problem, path, maxiter, xtol) if unbounded is not None \
         else (None, 0)
@@ -389,21 +395,28 @@ def bounded(model, problem, path: Path, maxiter: int, xtol: float, unbounded=Non
     ip, end, iterations, status, message = _interior(
         problem, optimum.copy() if optimum is not None else path, maxiter, xtol)
     total = first + iterations
-    if status in (Status.STALLED, Status.MAX_ITERATIONS) and optimum is not None \
-            and nearly_feasible is not None:
+    if status in FAILED and optimum is not None and nearly_feasible is not None:
         start, more, stages = nearly_feasible(problem, optimum, maxiter, xtol)
+        total += more
         if stages:
             retry = _interior(problem, start, maxiter, xtol)
-            total += more + retry[2]
+            total += retry[2]
             # kept unless it failed the same way: a SUCCESS, or an ILL_CONDITIONED
             # that states the accuracy reached, says more than the first stall
-            if retry[3] not in (Status.STALLED, Status.MAX_ITERATIONS):
+            if retry[3] not in FAILED:
                 ip, end, iterations, status, message = retry
                 before = total - iterations
                 phase = (f"after an interior point from the optimum without bounds "
                          f"failed, from that optimum moved toward the bounds by "
                          f"{stages} penalty stage{'s' if stages > 1 else ''} ({before} "
                          f"iterations before), ")
+        if status in FAILED and stages == len(STAGES) and infeasibility is not None:
+            certificate, more = infeasibility(problem, start, maxiter, xtol)
+            total += more
+            if certificate is not None:
+                status, message = Status.INFEASIBLE, (
+                    f"{certificate.describe(ip.inequalities.names, problem.h)}; the interior "
+                    f"point failed: {message.split('; the infeasibility stopped')[0]}")
     if status == Status.SUCCESS:
         message = f"{phase}interior point converged in {iterations} iterations{message}"
     return ip.result(end, total, status, message)

@@ -58,6 +58,9 @@ class Status(enum.IntEnum):
     #: Hessian of the Lagrangian is not positive definite on the constraints' tangent
     #: space): a saddle or maximum of the cost (:mod:`.optimality`).
     SADDLE = 8
+    #: The inequalities admit no solution near the start: the least violation the
+    #: penalty stages reach stopped falling as the penalty grew (:mod:`.penalty`).
+    INFEASIBLE = 9
 
 
 class NewtonError(RuntimeError):
