@@ -18,7 +18,8 @@ def curvature(model, ab: np.ndarray, bw: int, delta: np.ndarray, nodes: np.ndarr
     S + λ·Φ_d), d_η the node part of ``delta``; ``ab`` in the band storage of
     :meth:`.assembly.Problem.assemble`."""
     d = np.where(nodes, delta, 0.0)
-    return float(d @ product(model, ab, bw, d)) + shift * float(d @ d)
+    with np.errstate(over="ignore", invalid="ignore"):      # a wild step: inf or nan
+        return float(d @ product(model, ab, bw, d)) + shift * float(d @ d)
 
 
 def descent_step(problem, state, res, ab, bw, delta, contracting: bool = False,

@@ -20,8 +20,11 @@ Hessian of the Lagrangian positive definite on the tangent space of the equaliti
 the active bounds: :meth:`InteriorPoint.minimum`). Where that system is non-singular
 (strict complementarity, independent active constraints, second-order sufficiency) the
 correction is the first-order estimate of the distance to the KKT point, the same bound
-the equality solver's rule uses. Where rounding stalls the corrections above the
-tolerance the solve is ILL_CONDITIONED, returning the most accurate path met.
+the equality solver's rule uses. Where the iteration stalls, runs out of iterations or
+rounding stops its corrections above the tolerance, the active-set Newton of
+:mod:`.polish` tries to finish from the most accurate path met, under the same rule;
+failing that the solve is ILL_CONDITIONED (returning that path), STALLED or
+MAX_ITERATIONS.
 """
 from __future__ import annotations
 
@@ -33,6 +36,7 @@ from .interior_steps import step
 from .optimality import Curvature, second_order
 from .paths import Path
 from .penalty import STAGES
+from .polish import polish
 from .results import BVPResult, Status
 
 #: Initial barrier parameter (per unit time) and the factor on xtol of its floor.
@@ -123,12 +127,30 @@ class InteriorPoint:
             except LinAlgError as exc:
                 return path, it, Status.SINGULAR_JACOBIAN, (
                     f"singular Newton matrix at interior-point iteration {it} ({exc})")
+            if status in (Status.STALLED, Status.MAX_ITERATIONS):
+                return self._failed(path, it + 1, status, message)
             if status is not None:
-                return (path, it + (status is not Status.SUCCESS),
-                        *self._with_infeasibility(path, status, message))
-        return path, maxiter, *self._with_infeasibility(path, Status.MAX_ITERATIONS, (
+                return path, it + (status is not Status.SUCCESS), status, message
+        return self._failed(path, maxiter, Status.MAX_ITERATIONS, (
             f"the interior-point method did not converge in {maxiter} iterations "
             f"(barrier parameter {self.mu:.1e}, {self._last_errors()})"))
+
+    def _failed(self, path: Path, iterations: int, status: Status, message: str):
+        """(path, iterations, status, message) of a stalled or exhausted iteration: SUCCESS
+        where the active-set Newton (:mod:`.polish`) finishes from the most accurate path
+        met — it accepts only a KKT point within the tolerance, wherever it starts —
+        else the failure, with the infeasibility where it stopped decreasing."""
+        _, best, slacks = self.best
+        if best is not None and slacks is not None:
+            s, self.s = self.s, slacks
+            polished = polish(self, best, self.xtol * (1.0 + self.problem.size(best)))
+            if polished is not None:
+                path, self.s, finish = polished
+                how = "stalled" if status == Status.STALLED else "ran out of iterations"
+                return path, iterations, Status.SUCCESS, (
+                    f" (where it {how}, its most accurate iterate was finished){finish}")
+            self.s = s
+        return path, iterations, *self._with_infeasibility(path, status, message)
 
     def _with_infeasibility(self, path: Path, status: Status, message: str) -> tuple[Status, str]:
         """A stalled or exhausted solve whose primal infeasibility stopped decreasing
@@ -204,6 +226,10 @@ class InteriorPoint:
         if stagnant is not None:
             # the most accurate path met, with its own correction as its error estimate
             best, path, self.s = self.best
+            polished = polish(self, path, tolerance)
+            if polished is not None:
+                path, self.s, message = polished
+                return path, Status.SUCCESS, message
             return path, Status.ILL_CONDITIONED, (
                 f"the Newton correction of the KKT system stopped decreasing, between "
                 f"{min(self.corrections):.1e} and {stagnant:.1e}, above the tolerance "
@@ -418,7 +444,7 @@ def bounded(model, problem, path: Path, maxiter: int, xtol: float, unbounded=Non
                     f"{certificate.describe(ip.inequalities.names, problem.h)}; the interior "
                     f"point failed: {message.split('; the infeasibility stopped')[0]}")
     if status == Status.SUCCESS:
-        message = f"{phase}interior point converged in {iterations} iterations{message}"
+        message = f"{phase}interior point: {iterations} iterations{message}"
     return ip.result(end, total, status, message)
 
 
