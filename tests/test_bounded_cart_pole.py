@@ -135,6 +135,41 @@ def test_every_success_from_perturbed_guesses_is_a_feasible_minimum(cart_pole):
     assert len(minima) <= 2 and np.allclose(minima, [20.664623, 32.433644][-len(minima):])
 
 
+def test_a_thousand_steps_end_at_a_kkt_point_checked_independently(cart_pole):
+    """N = 1000, where the interior point from the optimum without bounds runs out of
+    iterations: the active-set Newton finishes it (the message says so), and in the NumPy
+    problem the result is a KKT point — feasible and complementary to 1e-9, Φ = 0, z ≥ 0,
+    and the gradient of S + z·c, by complex step over all 1994 node coordinates, is a
+    combination of the 999 pole equations' gradients to 1e-8 of ∇S (their multipliers
+    fitted by least squares). Before the residual of bounded models was evaluated from
+    increments, this solve ended ILL_CONDITIONED: its rounding floor was 10³ times the
+    unbounded cart-pole's."""
+    from test_independent_optimum import CS
+
+    model, module = cart_pole
+    N = 1000
+    prob = BoundedSwingUp(model, N, 14.0, 0.8)
+    r = module.solve_bvp(*prob.boundary, N, prob.h, maxiter=200)
+    assert r.success and "active-set Newton" in r.message, r.message
+    z, mult = prob.from_symvi(r), r.bound_multipliers
+    c = prob.values(z)
+    assert c.max() <= 1e-9 and (mult >= 0).all() and np.abs(mult * c).max() <= 1e-9
+    assert np.abs(prob.phi(z)).max() <= 1e-9
+
+    def gradient(fun):
+        return np.concatenate([fun(z[None, :] + 1j * CS * chunk).imag / CS
+                               for chunk in np.array_split(np.eye(z.size), 8)])
+
+    lagrangian = gradient(lambda v: prob.cost(v) + (mult * prob.values(v)).sum((-2, -1)))
+    cost = gradient(prob.cost)
+    pole = gradient(lambda v: prob.phi(v)[..., 0])           # (unknowns, windows)
+    lam = np.linalg.lstsq(pole, -lagrangian, rcond=None)[0]
+    stationarity = np.abs(lagrangian + pole @ lam).max() / np.abs(cost).max()
+    print(f"\nN = {N}: cost {r.cost:.10f}, relative stationarity {stationarity:.1e}, "
+          f"active windows {r.active.any(axis=1).sum()}")
+    assert stationarity <= 1e-8
+
+
 def test_a_force_limit_too_small_for_the_swing_up_is_infeasible(cart_pole):
     """|u| ≤ 5 at N = 60: symvi says INFEASIBLE, naming the force bound, its violation
     having stayed put as the penalty grew 10⁴-fold. Independently, SLSQP's epigraph

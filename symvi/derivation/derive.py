@@ -223,7 +223,7 @@ def _stack(vectors) -> sp.Matrix:
 def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
     engine, r, g = _Engine(dm), dm.order, dm.groupoid
     constrained, windowed = bool(dm.constraints), bool(dm.window_constraints)
-    sources = fibre_sources(dm)
+    sources, lifted = increment_sources(dm), fibre_sources(dm)
     full = _stencil(dm, 2 * r, windows=r + 1 if windowed else 0)
     residual = engine.variation(full, r, range(r + 1))
     one = _stencil(dm, 1)
@@ -276,7 +276,7 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
             (("value", sp.Matrix([c.xreplace(on_one) for c in dm.boundary_inequalities])),),
             "the inequalities without controls on one element (first-order rule): the "
             "check of the fixed boundary elements"))
-    if sources:
+    if lifted:
         kernels += _lifted_kernels(dm, engine, window, one)
     if dm.gauges:
         sections = [c for _, z in dm.gauges for c in z]
@@ -315,13 +315,25 @@ def fibre_sources(dm: DiscreteModel) -> tuple[int, ...]:
     The lifted Newton system takes the increments u_k of the elements as unknowns beside
     the nodes: a group factor's fibre hξ is one (−1), a pair factor's fibre q_{k+1} is
     measured from its base coordinate q_k (its index; u = q_{k+1} − q_k). It exists for
-    second-order whole-trajectory models, with or without constraints, whose fibres are
+    second-order whole-trajectory models without inequalities, with or without
+    constraints, whose fibres are
     each a group increment or the target of a base coordinate (pair, matrix-group and
     action factors: an action's base point Γ_{k+1} = Γ_k·τ(hξ_k) is the source of no
     fibre, so the change of coordinates to increments stays linear); () otherwise.
     """
+    return () if dm.inequalities else increment_sources(dm)
+
+
+def increment_sources(dm: DiscreteModel) -> tuple[int, ...]:
+    """:func:`fibre_sources` whether or not the model has inequalities: the coordinates
+    whose differences the residual is evaluated from (:func:`_in_increments`). A bounded
+    model has no lifted solve (its window Hessians would need the inequalities'
+    multipliers), but its residual needs the differences as much: evaluated from the
+    nodes, the cart-pole swing-up's rounded like the unbounded cart-pole's times 10³ at
+    N = 1000 in the directions its Newton matrix amplifies (rounding floors 1e-7 against
+    1e-10), and its solves ended ILL_CONDITIONED there."""
     g = dm.groupoid
-    if dm.order != 2 or not g.whole_trajectory or dm.inequalities:
+    if dm.order != 2 or not g.whole_trajectory:
         return ()
     one = _stencil(dm, 1)
     fibre = {s: i for i, s in enumerate(one.fs[0])}

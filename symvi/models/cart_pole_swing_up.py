@@ -13,8 +13,8 @@ The pole's equation EL(L)_θ = 0 is a second-order constraint with a multiplier 
 window, so the interior-point solve carries equality constraints beside the bounds, and
 its steps an inertia correction (``_runtime/interior.py``). There are other local
 optima: some perturbed guesses swing the pole round the other way (cost 20.47 at
-N = 250, no limit active). From N ≈ 1000 on the solve does not converge yet (README,
-"Bounds and path inequalities").
+N = 250, no limit active). At N = 1000 it succeeds from 10 of 22 guesses of the
+robustness battery (README, "Bounds and path inequalities").
 """
 import numpy as np
 import sympy as sp
