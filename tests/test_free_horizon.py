@@ -77,10 +77,13 @@ def test_a_free_horizon_needs_a_positive_time_cost(rho, pattern):
 
 def test_converges_from_perturbed_guesses_and_is_honest_at_n_1000(modules):
     """N = 100: from 5 seeded perturbations of the cubic guess (three sine modes of
-    0.3 rad), the same optimal horizon to 1e-8. N = 1000: the torques saturate on two
-    thirds of the windows and rounding stalls the KKT corrections near 5e-8, so the
-    default tolerance (2e-9) is not met — the solve says so (never SUCCESS) — while
-    xtol = 1e-7 succeeds, at a horizon between N = 400's and the limit."""
+    0.3 rad), the same optimal horizon to 1e-8. N = 1000, issue 21's robustness item: the
+    default guess and the battery's first ten perturbations (``battery.guesses``) all
+    succeed at the default tolerance, at one horizon to 1e-7 between N = 400's and the
+    limit. There the torques saturate on two thirds of the windows and rounding once
+    stalled the KKT corrections near 5e-8 (ILL_CONDITIONED at the default tolerance); the
+    active-set Newton (``_runtime/polish.py``) finishes them."""
+    import battery
     from so3 import cay, hat
 
     free, _ = modules
@@ -94,12 +97,14 @@ def test_converges_from_perturbed_guesses_and_is_honest_at_n_1000(modules):
         r = free.solve_bvp(ex.start, ex.end, 100, 0.01, guess=guess)
         assert r.success, r.message
         assert abs(r.t[-1] - reference.t[-1]) <= 1e-8
-    strict = free.solve_bvp(ex.start, ex.end, 1000, 1e-3)
-    if not strict.success:
-        assert strict.status.name == "ILL_CONDITIONED", strict.message
-        assert "attainable accuracy" in strict.message
-    loose = free.solve_bvp(ex.start, ex.end, 1000, 1e-3, xtol=1e-7)
-    assert loose.success, loose.message
-    print(f"\nN = 1000: default tolerance {strict.status.name}; xtol = 1e-7 T* = "
-          f"{loose.t[-1]:.8f}")
-    assert 0.955 < loose.t[-1] < 0.9588
+    perturbed = battery.guesses(free, "minimum_time_slew", 1000, count=10)
+    guesses = {"cubic": None} | {k: v for k, v in perturbed.items() if k.startswith("perturbed")}
+    horizons = {}
+    for label, guess in guesses.items():
+        r = free.solve_bvp(ex.start, ex.end, 1000, 1e-3, guess=guess)
+        assert r.success, f"{label}: {r.message}"
+        horizons[label] = r.t[-1]
+    T = np.array(list(horizons.values()))
+    print(f"\nN = 1000: {len(T)} of {len(guesses)} SUCCESS, T* = {T.min():.9f} … {T.max():.9f}")
+    assert T.max() - T.min() <= 1e-7
+    assert 0.955 < T.min() < 0.9588
