@@ -208,6 +208,48 @@ def test_a_thousand_steps_end_at_a_kkt_point_checked_independently(flyer):
     assert stationarity <= 1e-8
 
 
+def test_a_barely_touched_small_disc_is_not_dropped_by_the_active_set_newton(flyer):
+    """A false success found by a hunt, pinned: a keep-out disc of radius 0.01 placed so
+    that the optimum without it passes 1.5e-7 inside, N = 200. The optimum detours by that
+    much, with a disc multiplier of 4.5e-5. The active-set Newton, finishing an interior
+    point cut off at 36 iterations (and a warm start), once dropped the disc — its
+    multiplier below the iterate's slack — and accepted c = 3e-9 ≤ tolerance, the node 60
+    tolerances from the optimum: the disc's gradient is 0.02, so a dropped inequality
+    must now satisfy c ≤ tolerance·min(1, ‖∇c‖). Both routes must end at the reference
+    (xtol = 1e-10), feasible in independent code with the disc active."""
+    import dataclasses
+
+    model, N, R, eps, K = get(NAME), 200, 1e-2, 1.5e-7, 100
+    ex, h = model.example, T / N
+    previous = flyer.solve_bvp(ex.start, ex.end, N, h, maxiter=200)
+    for r in (0.6, 0.4, 0.2, 0.1, R):       # a continuation to a disc the path misses
+        previous = flyer.solve_bvp(ex.start, ex.end, N, h, params=dict(r=r), guess=previous,
+                                   maxiter=300)
+        assert previous.success, (r, previous.message)
+    assert not previous.active[:, 6].any()
+    pos = previous.g[:, :2, 2]
+    tangent = (pos[K + 1] - pos[K - 1]) / np.linalg.norm(pos[K + 1] - pos[K - 1])
+    centre = pos[K] + (R - eps) * np.array([-tangent[1], tangent[0]])
+    x = np.array([np.linalg.solve(g, np.r_[centre, 1.0])[:2] for g in previous.g])
+    start, end = (x[:2], previous.g[:2]), (x[-2:], previous.g[-2:])
+    moved = dataclasses.replace(previous, x=x)
+
+    def solve(guess, maxiter, xtol=1e-9):
+        return flyer.solve_bvp(start, end, N, h, params=dict(r=R), guess=guess,
+                               maxiter=maxiter, xtol=xtol)
+
+    reference = solve(dataclasses.replace(moved, active=None), 400, 1e-10)
+    prob = Flyer(N, {str(s): v for s, v in model.parameters} | dict(r=R))
+    prob.centre = np.r_[centre, 1.0]
+    for label, r in (("warm", solve(moved, 36)),
+                     ("cut off", solve(dataclasses.replace(moved, active=None), 36)),
+                     ("reference", reference)):
+        assert r.success, (label, r.message)
+        assert prob.values(prob.from_symvi(r)).max() <= 1e-12, label
+        assert r.active[:, 6].any() and r.bound_multipliers[:, 6].max() > 1e-5, label
+        assert np.abs(r.f - reference.f).max() <= 1e-9, label
+
+
 def test_unbounded_equations_hold_where_no_bound_is_active(flyer):
     """The variational oracle on the cost S = Σ L_d, with the flyer's own node variation
     g_j → g_j cay(εE_a) (the disc's centre seen from node j moves as cay(εE_a)⁻¹·c_j):

@@ -51,7 +51,8 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
         Multipliers start at zero. Or a previous :class:`BVPResult` with the same
         number of steps (a warm start: other boundary data, other parameters, a
         continuation): its free nodes, its multipliers, and its fibres where both nodes
-        are unchanged.
+        are unchanged; with bounds also its bound multipliers and active set, from which
+        the active-set Newton is tried before the interior point (:mod:`.polish`).
     maxiter, xtol, ftol : SUCCESS when the full Newton correction ‖Δ‖∞ — the estimate
         of the error left in the path (unknowns: node corrections and multipliers) —
         plus the rounding floor below is at most xtol·(1 + size), size the largest
@@ -113,8 +114,10 @@ def _fixed_horizon(model, start, end, N: int, h: float, p, guess, maxiter: int,
     if model.inequalities:
         check_boundary_data(model, path, p, h)
         cold = not isinstance(guess, BVPResult)
+        active = None if cold or guess.active is None \
+            or guess.active.shape != path.lam[:, model.constraints:].shape else guess.active
         return bounded(model, problem, path, maxiter, xtol, _unbounded if cold else None,
-                       _nearly_feasible, _infeasibility)
+                       _nearly_feasible, _infeasibility, active)
     if model.info.get("gauges"):
         check_boundary(model, path, problem.perturbed(path), p, h)
     path, norms, steps, status, message = _newton(problem, path, maxiter, xtol, ftol)

@@ -143,14 +143,30 @@ class InteriorPoint:
         _, best, slacks = self.best
         if best is not None and slacks is not None:
             s, self.s = self.s, slacks
-            polished = polish(self, best, self.xtol * (1.0 + self.problem.size(best)))
-            if polished is not None:
-                path, self.s, finish = polished
+            finished = self.finish(best, self.xtol * (1.0 + self.problem.size(best)))
+            if finished is not None:
                 how = "stalled" if status == Status.STALLED else "ran out of iterations"
-                return path, iterations, Status.SUCCESS, (
-                    f" (where it {how}, its most accurate iterate was finished){finish}")
+                return finished[0], iterations, Status.SUCCESS, (
+                    f" (where it {how}, its most accurate iterate was finished){finished[1]}")
             self.s = s
         return path, iterations, *self._with_infeasibility(path, status, message)
+
+    def finish(self, path: Path, tolerance: float, active: np.ndarray | None = None):
+        """(path, message, Newton steps) of the active-set Newton (:mod:`.polish`) from
+        ``path`` where it ends at a verified minimum (:meth:`minimum`), its slacks then
+        set; else None, the slacks unchanged. Not a saddle: a KKT point of another
+        active set can be one (the cart-pole swing-up at N = 700), and the interior
+        point's own failure, with its retries, says more."""
+        polished = polish(self, path, tolerance, active)
+        if polished is None:
+            return None
+        end, slacks, message, steps = polished
+        kept, self.s = self.s, slacks
+        status, message = self.minimum(end, message)
+        if status != Status.SUCCESS:
+            self.s = kept
+            return None
+        return end, message, steps
 
     def _with_infeasibility(self, path: Path, status: Status, message: str) -> tuple[Status, str]:
         """A stalled or exhausted solve whose primal infeasibility stopped decreasing
@@ -226,10 +242,9 @@ class InteriorPoint:
         if stagnant is not None:
             # the most accurate path met, with its own correction as its error estimate
             best, path, self.s = self.best
-            polished = polish(self, path, tolerance)
-            if polished is not None:
-                path, self.s, message = polished
-                return path, Status.SUCCESS, message
+            finished = self.finish(path, tolerance)
+            if finished is not None:
+                return finished[0], Status.SUCCESS, finished[1]
             return path, Status.ILL_CONDITIONED, (
                 f"the Newton correction of the KKT system stopped decreasing, between "
                 f"{min(self.corrections):.1e} and {stagnant:.1e}, above the tolerance "
@@ -391,7 +406,7 @@ class InteriorPoint:
 
 
 def bounded(model, problem, path: Path, maxiter: int, xtol: float, unbounded=None,
-            nearly_feasible=None, infeasibility=None) -> BVPResult:
+            nearly_feasible=None, infeasibility=None, active=None) -> BVPResult:
     """The interior-point solve of :func:`.bvp.solve_bvp` for a model with inequalities:
     its result, SUCCESS only at a verified minimum within the tolerance (module
     docstring).
@@ -413,7 +428,16 @@ def bounded(model, problem, path: Path, maxiter: int, xtol: float, unbounded=Non
     that fails the same way, ``infeasibility(problem, start, maxiter, xtol)`` →
     (certificate or None, iterations) continues the penalty stages: a certificate
     (:class:`.penalty.Infeasibility`) makes the result INFEASIBLE.
+
+    ``active``: a warm start's active set (the previous result's, its multipliers in
+    ``path``): the active-set Newton (:mod:`.polish`) is tried first from there, and the
+    interior point runs only where it fails — along a continuation whose active set
+    barely changes, a few Newton steps instead of a barrier solve.
     """
+    if active is not None:
+        warm = _warm(problem, path, active, xtol)
+        if warm is not None:
+            return warm
     optimum, first, converged = unbounded(problem, path, maxiter, xtol) \
         if unbounded is not None else (None, 0, False)
     without = "the optimum without bounds" if converged else \
@@ -448,6 +472,19 @@ def bounded(model, problem, path: Path, maxiter: int, xtol: float, unbounded=Non
     if status == Status.SUCCESS:
         message = f"{phase}interior point: {iterations} iterations{message}"
     return ip.result(end, total, status, message)
+
+
+def _warm(problem, path: Path, active: np.ndarray, xtol: float) -> BVPResult | None:
+    """The result of the active-set Newton from a warm start's ``path`` and ``active``
+    set where it ends at a verified minimum within the tolerance, else None."""
+    problem.shift, problem.penalty, problem.convex = 0.0, 0.0, False
+    ip = InteriorPoint(problem, path.copy(), xtol)      # its copy's z are the barrier's
+    finished = ip.finish(path, xtol * (1.0 + problem.size(path)), active)
+    if finished is None:
+        return None
+    end, message, steps = finished
+    return ip.result(end, steps, Status.SUCCESS,
+                     f"warm start from the previous active set{message}")
 
 
 def _interior(problem, path: Path, maxiter: int, xtol: float):

@@ -180,7 +180,9 @@ def _kept(model, previous: BVPResult, x, g, f, lam, h: float):
     rescaled by h_previous/h, which keeps the element w (kept as it was, a warm start at
     another h returned SUCCESS on fibres that were not the configurations' increments,
     at 46 % above the optimal cost). A kept fibre must also agree with the one recomputed
-    from the nodes to 1e-8 of its element."""
+    from the nodes to 1e-8 of its element. The multipliers are kept where their shapes
+    match: λ, and a bounded problem's z (the active-set Newton's warm start,
+    :func:`.interior.bounded`)."""
     count = x.shape[0]
     old_x = previous.x if previous.x is not None else np.zeros((count, 0))
     old_g = _configurations(model, previous.g, count, "guess configurations") \
@@ -199,8 +201,12 @@ def _kept(model, previous: BVPResult, x, g, f, lam, h: float):
         units = np.where(scaled, h, 1.0)
         agree = (np.abs((old - f) * units) <= 1e-8 * (1.0 + np.abs(old * units))).all(axis=1)
         f = np.where((keep & agree)[:, None], old, f)
-    if previous.multipliers is not None and previous.multipliers.shape == lam.shape:
-        lam = np.array(previous.multipliers, dtype=float)
+    lam = np.array(lam, dtype=float)
+    s = model.constraints
+    for part, previous_part in ((slice(0, s), previous.multipliers),
+                                (slice(s, None), previous.bound_multipliers)):
+        if previous_part is not None and np.shape(previous_part) == lam[:, part].shape:
+            lam[:, part] = previous_part     # λ, then the bound multipliers z
     return np.ascontiguousarray(f), lam
 
 
