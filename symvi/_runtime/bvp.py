@@ -21,7 +21,7 @@ from .band import cholesky_pivot, product
 from .barrier import check_boundary_data
 from .gauge import check_boundary
 from .horizon import free_horizon
-from .interior import bounded
+from .bounded import bounded
 from .globalisation import descent_step, line_search, natural_step
 from .optimality import second_order
 from .penalty import infeasibility, nearly_feasible
@@ -141,7 +141,7 @@ def _fixed_horizon(model, start, end, N: int, h: float, p, guess, maxiter: int,
 def _unbounded(problem: Problem, path: Path, maxiter: int, xtol: float):
     """(start or None, Newton iterations, converged): the problem without its
     inequalities (their multipliers held at zero) solved from ``path``, the interior-point
-    solve's start (:func:`.interior.bounded`); None where that solve ended on a
+    solve's start (:func:`.bounded.bounded`); None where that solve ended on a
     non-finite value, diverged or left the chart. An unconverged last iterate is start
     enough, the iterations having moved it downhill from the guess: the cart-pole
     swing-up at N = 1000 from the cubic guess needs 112 Newton iterations without bounds,

@@ -182,7 +182,7 @@ def _kept(model, previous: BVPResult, x, g, f, lam, h: float):
     at 46 % above the optimal cost). A kept fibre must also agree with the one recomputed
     from the nodes to 1e-8 of its element. The multipliers are kept where their shapes
     match: λ, and a bounded problem's z (the active-set Newton's warm start,
-    :func:`.interior.bounded`)."""
+    :func:`.bounded.bounded`)."""
     count = x.shape[0]
     old_x = previous.x if previous.x is not None else np.zeros((count, 0))
     old_g = _configurations(model, previous.g, count, "guess configurations") \

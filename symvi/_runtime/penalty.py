@@ -4,7 +4,7 @@ penalty on the violated inequalities, solved by the equality solver (issue 21).
 A cold bounded solve first solves the problem without its inequalities
 (:func:`.bvp._unbounded`) and starts the interior point at its optimum. Where that
 optimum violates them widely, the interior point may fail from there, and
-:func:`.interior.bounded` retries from the start built here: a planar flyer whose unbounded optimum brakes with a forward-only
+:func:`.bounded.bounded` retries from the start built here: a planar flyer whose unbounded optimum brakes with a forward-only
 thruster (f₁ < 0 on 107 of 199 windows) STALLED after 11 iterations — the fraction to
 the boundary cut the slack steps to α = 10⁻³…10⁻⁷, the bound multipliers grew to 10⁷
 and the inertia correction shifted the Hessian by 10³ of its scale. Minimising first
