@@ -106,14 +106,14 @@ def _newton(ip, path: Path, active: np.ndarray, tolerance: float):
         newton = _correction(ip, path, active)
         if newton is None:
             return None
-        delta, dz = newton
+        delta, dz, solve = newton
         correction = max(float(np.abs(delta).max(initial=0.0)),
                          float(np.abs(dz).max(initial=0.0)))
         # two in a row: where rounding dominates, the corrections wander rather than
         # fall, and one of them within the tolerance is luck (the cart-pole at N = 700:
         # corrections between 1.4e-7 and 9.3e-7 about a tolerance of 1.6e-7)
         if within and correction <= tolerance:
-            floor = _floor(ip, path, active, delta, dz)
+            floor = _floor(ip, path, active, delta, dz, solve)
             if correction + floor <= tolerance:
                 return path, step, correction, floor
         within = correction <= tolerance
@@ -126,8 +126,9 @@ def _newton(ip, path: Path, active: np.ndarray, tolerance: float):
 
 
 def _correction(ip, path: Path, active: np.ndarray):
-    """(Δ in the block layout, Δz of the active rows) of the active-set Newton step at
-    ``path``, or None where something is not finite or the matrix is singular."""
+    """(Δ in the block layout, Δz of the active rows, solve) of the active-set Newton step
+    at ``path`` — ``solve(rhs)`` applies the factorised matrix's inverse, refined once —
+    or None where something is not finite or the matrix is singular."""
     from scipy.sparse import bmat, csr_matrix, dia_matrix
     from scipy.sparse.linalg import splu
 
@@ -140,16 +141,19 @@ def _correction(ip, path: Path, active: np.ndarray):
     G = _block_jacobian(ip, active)
     rows = G.shape[0]
     K = bmat([[J, G.T], [G, csr_matrix((rows, rows))]], format="csc")
-    rhs = -np.concatenate([res, ineq.values[active]])
     try:
         lu = splu(K)
     except RuntimeError:        # exactly singular: dependent active constraints
         return None
-    x = lu.solve(rhs)
-    x += lu.solve(rhs - K @ x)      # one refinement: SuperLU's pivoting is threshold-based
+
+    def solve(rhs: np.ndarray) -> np.ndarray:
+        x = lu.solve(rhs)
+        return x + lu.solve(rhs - K @ x)    # one refinement: SuperLU pivots by threshold
+
+    x = solve(-np.concatenate([res, ineq.values[active]]))
     if not np.isfinite(x).all():
         return None
-    return x[:size], x[size:]
+    return x[:size], x[size:], solve
 
 
 def _block_jacobian(ip, active: np.ndarray):
@@ -176,13 +180,15 @@ def _block_jacobian(ip, active: np.ndarray):
                       shape=(len(windows), size))
 
 
-def _floor(ip, path: Path, active: np.ndarray, delta: np.ndarray, dz: np.ndarray) -> float:
+def _floor(ip, path: Path, active: np.ndarray, delta: np.ndarray, dz: np.ndarray,
+           solve) -> float:
     """The largest ‖·‖∞ of the change in the active-set correction when every node, λ and
     active z moves by one unit in the last place, over :data:`SAMPLES` random directions:
-    the noise under it (as :meth:`.interior.InteriorPoint.rounding_floor`). More than one:
-    on nearly dependent active rows (the cart-pole's track limit at adjacent windows,
-    N = 700) eight directions gave 7e-9 to 5.1e-7, and the first alone 1.1e-7."""
-    problem, eps = ip.problem, np.finfo(float).eps
+    the residual's noise through the same factorised matrix ``solve`` (as the equality
+    solver's :meth:`.assembly.Problem.rounding_correction`). More than one direction: on
+    nearly dependent active rows (the cart-pole's track limit at adjacent windows,
+    N = 700) eight gave 7e-9 to 5.1e-7, and the first alone 1.1e-7."""
+    problem, ineq, eps = ip.problem, ip.inequalities, np.finfo(float).eps
     floor = 0.0
     for seed in range(SAMPLES):
         rng = np.random.default_rng(seed)
@@ -191,11 +197,12 @@ def _floor(ip, path: Path, active: np.ndarray, delta: np.ndarray, dz: np.ndarray
         if rounded is None:
             return np.inf
         rounded.lam[:, ip.s_count:][active] *= 1.0 + eps * rng.choice((-1.0, 1.0), dz.size)
-        other = _correction(ip, rounded, active)
-        if other is None:
+        res, _, _, finite = problem.assemble(rounded, False)
+        if not (finite and ineq.evaluate(rounded, problem.p, problem.h)):
             return np.inf
-        floor = max(floor, float(np.abs(other[0] - delta).max(initial=0.0)),
-                    float(np.abs(other[1] - dz).max(initial=0.0)))
+        other = solve(-np.concatenate([res, ineq.values[active]]))
+        floor = max(floor, float(np.abs(other[:delta.size] - delta).max(initial=0.0)),
+                    float(np.abs(other[delta.size:] - dz).max(initial=0.0)))
     return floor
 
 
