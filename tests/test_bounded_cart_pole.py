@@ -25,7 +25,7 @@ import numpy as np
 import pytest
 
 from symvi.models import get
-from test_bounded_oc import assert_same_optimum_as_slsqp
+from test_bounded_oc import assert_same_optimum_as_slsqp, relative_stationarity
 from test_independent_optimum import CartPole, pair_point
 
 NAME, T, N_EXAMPLE, N_SLSQP = "cart_pole_swing_up", 2.5, 250, 60
@@ -52,6 +52,16 @@ class BoundedSwingUp(CartPole):
     def slack(self, z):
         c = -self.values(z)
         return c.reshape(c.shape[:-2] + (-1,))
+
+
+def assert_feasible_and_complementary(prob, r, label: str) -> None:
+    """symvi's result ``r`` in the NumPy problem: the bounds and the pole equations hold
+    to 1e-9, the bound multipliers are ≥ 0 and complementary to 1e-9."""
+    z = prob.from_symvi(r)
+    c = prob.values(z)
+    assert c.max() <= 1e-9 and np.abs(prob.phi(z)).max() <= 1e-9, label
+    assert (r.bound_multipliers >= 0).all(), label
+    assert np.abs(r.bound_multipliers * c).max() <= 1e-9, label
 
 
 @pytest.fixture(scope="module")
@@ -122,11 +132,7 @@ def test_every_success_from_perturbed_guesses_is_a_feasible_minimum(cart_pole):
             assert r.message and r.status.name != "SUCCESS"
             failures[label] = r.status.name
             continue
-        z = prob.from_symvi(r)
-        c = prob.values(z)
-        assert c.max() <= 1e-9 and np.abs(prob.phi(z)).max() <= 1e-9, label
-        assert (r.bound_multipliers >= 0).all(), label
-        assert np.abs(r.bound_multipliers * c).max() <= 1e-9, label
+        assert_feasible_and_complementary(prob, r, label)
         costs[label] = r.cost
     print(f"\n{len(costs)} of {len(guesses)} succeeded; failures {failures}; costs "
           f"{sorted(set(round(v, 8) for v in costs.values()))}")
@@ -160,11 +166,7 @@ def test_converges_at_a_thousand_steps_from_the_default_and_ten_perturbed_guesse
             assert r.status.name != "SUCCESS" and r.message
             failures[label] = r.status.name
             continue
-        z = prob.from_symvi(r)
-        c = prob.values(z)
-        assert c.max() <= 1e-9 and np.abs(prob.phi(z)).max() <= 1e-9, label
-        assert (r.bound_multipliers >= 0).all(), label
-        assert np.abs(r.bound_multipliers * c).max() <= 1e-9, label
+        assert_feasible_and_complementary(prob, r, label)
         costs[label] = r.cost
     print(f"\nN = {N}: {len(costs)} of 11, costs {sorted(set(round(v, 8) for v in costs.values()))}; "
           f"failures {failures}")
@@ -182,27 +184,15 @@ def test_a_thousand_steps_end_at_a_kkt_point_checked_independently(cart_pole):
     fitted by least squares). Before the residual of bounded models was evaluated from
     increments, this solve ended ILL_CONDITIONED: its rounding floor was 10³ times the
     unbounded cart-pole's."""
-    from test_independent_optimum import CS
-
     model, module = cart_pole
     N = 1000
     prob = BoundedSwingUp(model, N, 14.0, 0.8)
     r = module.solve_bvp(*prob.boundary, N, prob.h, maxiter=200)
     assert r.success and "active-set Newton" in r.message, r.message
+    assert_feasible_and_complementary(prob, r, f"N = {N}")
     z, mult = prob.from_symvi(r), r.bound_multipliers
-    c = prob.values(z)
-    assert c.max() <= 1e-9 and (mult >= 0).all() and np.abs(mult * c).max() <= 1e-9
-    assert np.abs(prob.phi(z)).max() <= 1e-9
 
-    def gradient(fun):
-        return np.concatenate([fun(z[None, :] + 1j * CS * chunk).imag / CS
-                               for chunk in np.array_split(np.eye(z.size), 8)])
-
-    lagrangian = gradient(lambda v: prob.cost(v) + (mult * prob.values(v)).sum((-2, -1)))
-    cost = gradient(prob.cost)
-    pole = gradient(lambda v: prob.phi(v)[..., 0])           # (unknowns, windows)
-    lam = np.linalg.lstsq(pole, -lagrangian, rcond=None)[0]
-    stationarity = np.abs(lagrangian + pole @ lam).max() / np.abs(cost).max()
+    stationarity = relative_stationarity(prob, z, mult, lambda v: prob.phi(v)[..., 0])
     print(f"\nN = {N}: cost {r.cost:.10f}, relative stationarity {stationarity:.1e}, "
           f"active windows {r.active.any(axis=1).sum()}")
     assert stationarity <= 1e-8

@@ -19,7 +19,7 @@ import pytest
 
 from symvi.models import get
 from symvi.models.planar_flyer import CENTRE, T
-from test_bounded_oc import assert_same_optimum_as_slsqp
+from test_bounded_oc import assert_same_optimum_as_slsqp, relative_stationarity
 
 NAME, N_SLSQP = "planar_flyer", 40
 
@@ -181,8 +181,6 @@ def test_a_thousand_steps_end_at_a_kkt_point_checked_independently(flyer):
     to 1e-9, z ≥ 0, and the gradient of S + z·c, by complex step over all 2994
     increments, is a combination of the end constraint's three gradients to 1e-8 of
     ∇S (the three multipliers fitted by least squares)."""
-    from test_independent_optimum import CS
-
     model, N = get(NAME), 1000
     prob = Flyer(N, {str(s): v for s, v in model.parameters})
     r = flyer.solve_bvp(model.example.start, model.example.end, N, prob.h, maxiter=200)
@@ -192,17 +190,7 @@ def test_a_thousand_steps_end_at_a_kkt_point_checked_independently(flyer):
     assert c.max() <= 1e-9 and (mult >= 0).all() and np.abs(mult * c).max() <= 1e-9
     assert np.abs(prob.constraints(z)).max() <= 1e-9
 
-    def gradient(fun):
-        rows = []
-        for chunk in np.array_split(np.eye(z.size), 12):
-            rows.append(fun(z[None, :] + 1j * CS * chunk).imag / CS)
-        return np.concatenate(rows)
-
-    lagrangian = gradient(lambda v: prob.cost(v) + (mult * prob.values(v)).sum((-2, -1)))
-    cost = gradient(prob.cost)
-    ends = gradient(prob.constraints)                    # (unknowns, 3)
-    nu = np.linalg.lstsq(ends, -lagrangian, rcond=None)[0]
-    stationarity = np.abs(lagrangian + ends @ nu).max() / np.abs(cost).max()
+    stationarity = relative_stationarity(prob, z, mult, prob.constraints, chunks=12)
     print(f"\nN = {N}: {r.message.split('; finished')[1][:60]}…; relative stationarity "
           f"{stationarity:.1e}, active windows {r.active.any(axis=1).sum()}")
     assert stationarity <= 1e-8

@@ -172,8 +172,7 @@ class Problem:
             return np.inf
         floor = 0.0
         for seed in seeds:
-            signs = np.random.default_rng(seed).choice((-1.0, 1.0), ab.shape[1])
-            rounded = self.moved(path, np.finfo(float).eps * signs * self.magnitudes(path), 1.0)
+            rounded, _ = self.rounded(path, seed)
             if rounded is None:
                 return np.inf
             other, _, _, finite = self.assemble(rounded, False)
@@ -186,6 +185,15 @@ class Problem:
                     - self.solve(ab, bw, -base, at=path)
             floor = max(floor, float(np.abs(delta).max(initial=0.0)))
         return floor
+
+    def rounded(self, path: Path, seed: int):
+        """(``path`` with every unknown — node, multiplier — moved by one unit in the last
+        place of its magnitude in the random direction ``seed``, or None outside the
+        chart; the generator, to draw further directions for unknowns beyond the band):
+        the rounding floors' sample."""
+        rng = np.random.default_rng(seed)
+        units = np.finfo(float).eps * self.magnitudes(path)
+        return self.moved(path, rng.choice((-1.0, 1.0), units.size) * units, 1.0), rng
 
     def perturbed(self, path: Path) -> Path:
         """``path`` with every free node moved by a fixed pseudo-random variation of size

@@ -110,6 +110,6 @@ def _interior(problem, path: Path, maxiter: int, xtol: float):
     problem.shift, problem.penalty, problem.convex = 0.0, 0.0, False
     ip = InteriorPoint(problem, path, xtol)
     path, iterations, status, message = ip.solve(path, maxiter)
-    if status == Status.SUCCESS:
+    if status == Status.SUCCESS and ip.verified is not path:   # the active-set Newton's is
         status, message = ip.minimum(path, message)
     return ip, path, iterations, status, message

@@ -65,6 +65,7 @@ class InteriorPoint:
         self.mu, self.floor = MU_START, MU_FLOOR * xtol
         self.corrections: list[float] = []     # the KKT corrections, one per iteration
         self.best = (np.inf, path, None)        # (correction, path, slacks) of the best
+        self.verified = None        # a path :meth:`minimum` has verified (:meth:`finish`)
         self.history: dict[str, list] = {k: [] for k in (
             "mu", "primal", "dual", "complementarity", "alpha")}
         self.inequalities.evaluate(path, problem.p, problem.h)
@@ -163,6 +164,7 @@ class InteriorPoint:
         if status != Status.SUCCESS:
             self.s = kept
             return None
+        self.verified = end
         return end, message, steps
 
     def _with_infeasibility(self, path: Path, status: Status, message: str) -> tuple[Status, str]:
@@ -210,7 +212,7 @@ class InteriorPoint:
             if max(error, correction) < self.best[0]:
                 self.best = (max(error, correction), path, self.s.copy())
             if max(error, correction) <= tolerance:
-                floor = self.rounding_floor(path, kkt, ab.shape[1])
+                floor = self.rounding_floor(path, kkt)
                 if max(error, correction) + floor <= tolerance:
                     return path, Status.SUCCESS, (
                         f"; Newton correction of the KKT system (μ = 0) {correction:.1e}, "
@@ -257,9 +259,9 @@ class InteriorPoint:
                 f"parameter {self.mu:.1e}, {self._last_errors()})")
         return moved, None, ""
 
-    def rounding_floor(self, path: Path, kkt: np.ndarray, size: int) -> float:
+    def rounding_floor(self, path: Path, kkt: np.ndarray) -> float:
         """The largest ‖·‖∞ of the change in the μ = 0 KKT correction ``kkt``
-        (:meth:`kkt_correction` at ``path``; ``size`` unknowns in the reduced system) when
+        (:meth:`kkt_correction` at ``path``) when
         every unknown — node, λ, z and slack — moves by one unit in the last place of its
         magnitude, over :data:`.polish.SAMPLES` random directions: the noise under that
         correction, as the equality solver's floor
@@ -269,12 +271,10 @@ class InteriorPoint:
         sample of the noise, and on nearly dependent active rows eight gave 7e-9 to
         5.1e-7 (the active-set Newton's, :func:`.polish._floor`). The system of the last
         moved path takes the place of the one at ``path``."""
-        problem, eps = self.problem, np.finfo(float).eps
+        eps = np.finfo(float).eps
         z, s, floor = self.z(path), self.s, 0.0
         for seed in range(SAMPLES):
-            rng = np.random.default_rng(seed)
-            rounded = problem.moved(path, eps * rng.choice((-1.0, 1.0), size)
-                                    * problem.magnitudes(path), 1.0)
+            rounded, rng = self.problem.rounded(path, seed)
             if rounded is None:
                 return np.inf
             rounded.lam[:, self.s_count:] = z * (1.0 + eps * rng.choice((-1.0, 1.0), z.shape))
@@ -338,7 +338,7 @@ class InteriorPoint:
         scale = float(np.abs(ab[2 * bw][self.nodes]).max(initial=0.0))
         verdict = None
         for rho in PENALTIES if finite else ():
-            verdict = self.curvature(path, ab, bw, active * rho * scale / self._gradients())
+            verdict = self.curvature(path, ab, bw, active * rho * scale / self.squared_gradients())
             if verdict.minimum:
                 return Status.SUCCESS, message
         pivot = "" if verdict is None else f" (Cholesky pivot {verdict.pivot:.1e})"
@@ -361,11 +361,12 @@ class InteriorPoint:
         work[2 * bw] += shift * self.nodes
         return second_order(work, bw, self.rows, lambda: cholesky_pivot(self.model, work, bw))
 
-    def _gradients(self) -> np.ndarray:
+    def squared_gradients(self) -> np.ndarray:
         """|∇c_j|² per window and inequality: the penalties on the active ones are
         measured per row, since a bound on a control (∂u/∂η ∝ 1/h²) and one on a
         coordinate differ in scale by 1/h⁴ (a common scale hid the cart-pole's track
-        limit: a false SADDLE at a verified minimum)."""
+        limit: a false SADDLE at a verified minimum). The active-set Newton's test of
+        dropped rows uses them too (:mod:`.polish`)."""
         return np.maximum((self.inequalities.jacobian ** 2).sum(axis=2), 1e-300)
 
     def inertia_shift(self, path: Path, bw: int, start: float) -> float:
@@ -379,7 +380,7 @@ class InteriorPoint:
         only makes the test stricter (GᵀΣG − GᵀΣ'G is positive semidefinite). The
         cart-pole swing-up with force and track limits: without it 4 of 8 limit pairs
         ended in MAX_ITERATIONS and one at a saddle; with it all 8 succeed."""
-        weight = np.minimum(self.z(path) / self.s, CAP * self.scale / self._gradients())
+        weight = np.minimum(self.z(path) / self.s, CAP * self.scale / self.squared_gradients())
         shift = start
         while shift <= 1e3:
             if self.curvature(path, self.hessian, bw, weight, shift * self.scale).minimum:

@@ -87,7 +87,8 @@ def nearly_feasible(problem: Problem, path: Path, newton, maxiter: int,
         return path, 0, 0
     count = solved = 0
     for rho in STAGES:
-        moved, steps, status = _stage(problem, inequalities, path, rho, newton, maxiter, xtol)
+        moved, steps, status, _ = _stage(problem, inequalities, path, rho, newton, maxiter,
+                                         xtol)
         count += steps
         if status != Status.SUCCESS:
             break
@@ -128,10 +129,11 @@ def infeasibility(problem: Problem, start: Path, newton, maxiter: int,
     inequalities = Inequalities(problem.model, start.x.shape[0])
     violations, path, count = [_violation(inequalities, problem, start)], start, 0
     for rho in CERTIFYING:
-        moved, steps, status = _stage(problem, inequalities, path, rho, newton, maxiter, xtol)
+        moved, steps, status, stage = _stage(problem, inequalities, path, rho, newton,
+                                             maxiter, xtol)
         count += steps
         if status not in (Status.SUCCESS, Status.ILL_CONDITIONED) or \
-                not _settled(PenalisedProblem(problem, inequalities, rho * problem.h), moved):
+                not _settled(stage, moved):
             return None, count
         path = moved
         violations.append(_violation(inequalities, problem, path))
@@ -144,10 +146,11 @@ def infeasibility(problem: Problem, start: Path, newton, maxiter: int,
 
 def _stage(problem: Problem, inequalities: Inequalities, path: Path, rho: float, newton,
            maxiter: int, xtol: float):
-    """(minimiser, Newton iterations, status) of S + ρh/2 Σ max(0, c)² from ``path``."""
+    """(minimiser, Newton iterations, status, the stage's problem) of
+    S + ρh/2 Σ max(0, c)² from ``path``."""
     stage = PenalisedProblem(problem, inequalities, rho * problem.h)
     moved, _, steps, status, _ = newton(stage, path.copy(), maxiter, xtol, 0.0)
-    return moved, len(steps), status
+    return moved, len(steps), status, stage
 
 
 def _settled(stage: PenalisedProblem, path: Path) -> bool:

@@ -73,7 +73,12 @@ def polish(ip, path: Path, tolerance: float, active: np.ndarray | None = None):
             return None
         z, c = ip.z(path), ineq.values
         leaving = active & (z < 0.0)
-        joining = ~active & (c > tolerance * np.minimum(1.0, _gradient_norms(ineq)))
+        # a dropped row violated by c lies about c/‖∇c‖ from the nodes that meet it: it
+        # may stay dropped while that is within the tolerance, and c too (a disc of
+        # radius 0.01, ‖∇c‖ ≈ 0.02, once stayed dropped at c = 3e-9 < tolerance, its
+        # node 60 tolerances from the optimum, where its multiplier is 4.5e-5)
+        norms = np.sqrt(ip.squared_gradients())
+        joining = ~active & (c > tolerance * np.minimum(1.0, norms))
         if not (leaving.any() or joining.any()):
             return _accepted(ip, path, active, tolerance, total, correction, floor)
         extreme = np.where(active, z, np.inf) if leaving.any() else np.where(active, -np.inf, -c)
@@ -83,15 +88,6 @@ def polish(ip, path: Path, tolerance: float, active: np.ndarray | None = None):
         if (active == single).all():
             single = None
     return None
-
-
-def _gradient_norms(ineq) -> np.ndarray:
-    """‖∇c_j‖₂ per window and inequality: a dropped inequality violated by c_j lies about
-    c_j/‖∇c_j‖ from the nearest node correction that meets it, so it may stay dropped
-    only while that distance is within the tolerance (and c_j itself too). A keep-out
-    disc of radius 0.01 (‖∇c‖ ≈ 0.02) once stayed dropped at c = 3e-9 < tolerance, its
-    node 60 tolerances from the optimum, where the disc's multiplier is 4.5e-5."""
-    return np.sqrt((ineq.jacobian ** 2).sum(axis=2))
 
 
 def _newton(ip, path: Path, active: np.ndarray, tolerance: float):
@@ -191,9 +187,7 @@ def _floor(ip, path: Path, active: np.ndarray, delta: np.ndarray, dz: np.ndarray
     problem, ineq, eps = ip.problem, ip.inequalities, np.finfo(float).eps
     floor = 0.0
     for seed in range(SAMPLES):
-        rng = np.random.default_rng(seed)
-        rounded = problem.moved(path, eps * rng.choice((-1.0, 1.0), delta.size)
-                                * problem.magnitudes(path), 1.0)
+        rounded, rng = problem.rounded(path, seed)
         if rounded is None:
             return np.inf
         rounded.lam[:, ip.s_count:][active] *= 1.0 + eps * rng.choice((-1.0, 1.0), dz.size)
