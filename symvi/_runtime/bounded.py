@@ -85,7 +85,7 @@ def bounded(model, problem, path: Path, maxiter: int, xtol: float, unbounded=Non
             if certificate is not None:
                 status, message = Status.INFEASIBLE, (
                     f"{certificate.describe(ip.inequalities.names, problem.h)}; the interior "
-                    f"point failed: {message.split('; the infeasibility stopped')[0]}")
+                    f"point failed: {ip.failure}")
     if status == Status.SUCCESS:
         message = f"{phase}interior point: {iterations} iterations{message}"
     return ip.result(end, total, status, message)
