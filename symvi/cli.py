@@ -6,6 +6,8 @@ arguments).
 from __future__ import annotations
 
 import argparse
+import importlib
+import importlib.util
 import math
 import sys
 import time
@@ -47,21 +49,33 @@ def _run(args) -> int:
     model = load(args.model)
     if model.example is None:
         raise ModelError(f"model {model.name!r} declares no example run")
+    params = _parameters(args.param, model)
+    if args.plot:
+        _check_plot_support()
     start = time.perf_counter()
-    module = compile_model(model, args.output)
+    module = compile_model(model, args.build_dir)
     built = time.perf_counter() - start
     ex = model.example
     steps = args.steps if args.steps is not None else ex.n_steps
-    h = args.h if args.h is not None else ex.h
+    # an optimal-control example keeps its horizon when only the steps change
+    h = args.h if args.h is not None else \
+        ex.h * ex.n_steps / steps if ex.whole_trajectory else ex.h
     print(f"model      {model.name} — {model.description}")
-    print(f"build      {built:.2f} s ({Path(args.output) / model.name})")
-    if ex.whole_trajectory:
-        return _solve(module, ex, steps, h)
+    print(f"build      {built:.2f} s ({Path(args.build_dir) / model.name})")
+    if params:
+        print(f"params     {', '.join(f'{k} = {v:g}' for k, v in params.items())}")
+    result = (_solve if ex.whole_trajectory else _integrate)(module, ex, steps, h, params, args)
+    _outputs(result, model, module, args)
+    return 0 if result.success else 1
+
+
+def _integrate(module, ex, steps: int, h: float, params: dict, args):
+    """The step-by-step example: integrate and summarise."""
     start = time.perf_counter()
-    result = module.integrate(ex.initial, steps, h, keep_every=args.keep_every)
+    result = module.integrate(ex.initial, steps, h, params, keep_every=args.keep_every)
     elapsed = time.perf_counter() - start
-    print(f"integrate  {steps} steps, h = {h:g}, T = {steps * h:g}: {elapsed * 1e3:.1f} ms "
-          f"({steps / max(elapsed, 1e-9):,.0f} steps/s)")
+    print(f"integrate  {steps} steps, h = {h:g}, t = {result.t[0]:g} … {result.t[-1]:g}: "
+          f"{elapsed * 1e3:.1f} ms ({steps / max(elapsed, 1e-9):,.0f} steps/s)")
     print(f"status     {result.status.name}: {result.message}")
     if len(result.newton_iterations):
         print(f"newton     mean {result.newton_iterations.mean():.2f} iterations per step")
@@ -73,13 +87,16 @@ def _run(args) -> int:
               f"g = {np.array2string(result.g[-1].ravel(), precision=6)}")
     else:
         print(f"final      q = {np.array2string(result.q[-1], precision=6)}")
-    return 0 if result.success else 1
+    return result
 
 
-def _solve(module, ex, steps: int, h: float) -> int:
-    """The whole-trajectory example (optimal control): solve and summarise."""
+def _solve(module, ex, steps: int, h: float, params: dict, args):
+    """The whole-trajectory example (optimal control): solve and summarise. SciPy, which
+    the solve imports on first use, is imported before the clock starts."""
+    for name in ("scipy.linalg", "scipy.sparse.linalg"):
+        importlib.import_module(name)
     start = time.perf_counter()
-    result = module.solve_bvp(ex.start, ex.end, steps, h)
+    result = module.solve_bvp(ex.start, ex.end, steps, h, params)
     elapsed = time.perf_counter() - start
     print(f"solve_bvp  N = {steps}, h = {h:g}, T = {steps * h:g}: {elapsed * 1e3:.1f} ms, "
           f"{result.iterations} Newton iterations")
@@ -97,7 +114,47 @@ def _solve(module, ex, steps: int, h: float) -> int:
                   zip(result.inequalities, result.active.sum(axis=0)) if count]
         print(f"bounds     active of {result.active.shape[0]} windows: "
               f"{', '.join(active) or 'none'}")
-    return 0 if result.success else 1
+    return result
+
+
+def _outputs(result, model, module, args) -> None:
+    """``--output`` (the result's arrays, its ``save``) and ``--plot``."""
+    if args.output:
+        result.save(args.output)
+        print(f"output     {args.output}")
+    if args.plot:
+        from .plots import plot_result
+        plot_result(result, model, module.INFO, args.plot)
+        print(f"plot       {args.plot}")
+
+
+def _parameters(given: list[str] | None, model) -> dict[str, float]:
+    """``--param NAME=VALUE`` (repeated) as a mapping, each name a parameter of ``model``
+    and each value a finite number."""
+    known = [str(k) for k, _ in model.parameters]
+    out = {}
+    for item in given or ():
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        if not sep or not name:
+            raise ValueError(f"--param expects NAME=VALUE, got {item!r}")
+        if name not in known:
+            raise ValueError(f"--param {name}: model {model.name!r} has no parameter "
+                             f"{name!r}; its parameters: {known or 'none'}")
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not math.isfinite(value):
+            raise ValueError(f"--param {name}: expected a finite number, got {text!r}")
+        out[name] = value
+    return out
+
+
+def _check_plot_support() -> None:
+    """Refuse ``--plot`` before building and running when matplotlib is missing."""
+    if importlib.util.find_spec("matplotlib") is None:
+        raise ValueError("--plot needs matplotlib: pip install 'symvi[plots]'")
 
 
 def _check(args) -> int:
@@ -144,15 +201,28 @@ def parser() -> argparse.ArgumentParser:
                         "that was running")
     c.set_defaults(func=_compile)
     r = sub.add_parser("run", help="compile MODEL and run its example (integrate, or "
-                                   "solve the whole trajectory of an optimal-control problem)")
-    r.add_argument("model")
-    r.add_argument("-o", "--output", default="generated")
+                                   "solve the whole trajectory of an optimal-control problem)",
+                       description="Compile MODEL (cached) and run the example it declares: "
+                                   "integrate it step by step, or solve the whole trajectory "
+                                   "of an optimal-control problem; print a summary. Exit 0 on "
+                                   "SUCCESS, 1 otherwise, 2 on bad input.")
+    r.add_argument("model", help="a model file (.py defining `model`) or a bundled model name "
+                                 "(symvi list)")
+    r.add_argument("--build-dir", default="generated", metavar="DIR",
+                   help="where the compiled package goes (default: generated)")
+    r.add_argument("--param", action="append", metavar="NAME=VALUE",
+                   help="override a parameter of the model (repeat for several)")
     r.add_argument("--steps", type=int, default=None,
-                   help="number of steps (N for a whole-trajectory example); default: the "
-                        "example's")
+                   help="number of steps (N for a whole-trajectory example, whose horizon "
+                        "is kept unless --h is given); default: the example's")
     r.add_argument("--h", type=float, default=None, help="time step; default: the example's")
     r.add_argument("--keep-every", type=int, default=1, metavar="K",
-                   help="store only every K-th node (long runs)")
+                   help="store only every K-th node (long integrations)")
+    r.add_argument("-o", "--output", default=None, metavar="FILE.npz",
+                   help="write the result's arrays to a NumPy archive (numpy.load reads it)")
+    r.add_argument("--plot", default=None, metavar="FILE.png",
+                   help="write a plot of the result: configuration, velocities, and the "
+                        "energy error or the controls (needs matplotlib)")
     r.set_defaults(func=_run)
     k = sub.add_parser("check", help="run the derivation checks on MODEL (exit 0: all "
                                      "pass, 1: a check failed, 2: bad input)")

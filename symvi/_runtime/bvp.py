@@ -12,6 +12,7 @@ and its inertia), :mod:`.globalisation` (descent, natural and backtracking steps
 from __future__ import annotations
 
 from dataclasses import replace
+from typing import Mapping
 
 import numpy as np
 
@@ -30,7 +31,9 @@ from .results import BVPResult, Status
 from .storage import check_path_memory as check_memory
 
 
-def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=None,
+def solve_bvp(model, start, end, n_steps: int, h: float,
+              params: Mapping[str, float] | None = None, *,
+              guess: str | np.ndarray | tuple | BVPResult | None = None,
               maxiter: int = 100, xtol: float = 1e-9, ftol: float = 0.0,
               raise_on_failure: bool = False) -> BVPResult:
     """Solve for the free nodes (and multipliers) with the first and last r nodes fixed.
@@ -43,6 +46,8 @@ def solve_bvp(model, start, end, n_steps: int, h: float, params=None, *, guess=N
         configurations (r, d, d) — a tuple of such arrays with several group factors.
         On an action groupoid the base points must follow the configurations.
     n_steps : N, the number of elements (N + 1 nodes).
+    params : parameter overrides (mapping name → value); the others keep the defaults
+        compiled in (``INFO["defaults"]``).
     guess : the free nodes r … N−r in the same layout, or how to interpolate them between
         the fixed ends: ``"cubic"`` (default) matches the end velocities as well as the
         positions (in τ-coordinates at g_{r−1} on groups, the base points moved along;

@@ -1,7 +1,8 @@
 """The Python face of a compiled model: kernels, the step map and the whole-trajectory solve."""
 from __future__ import annotations
 
-from typing import Mapping
+import inspect
+from typing import Callable, Mapping
 
 import numpy as np
 
@@ -10,6 +11,21 @@ from .bvp import solve_bvp
 from .geometry import check_base_points, check_configurations
 from .paths import increments
 from .stepping import integrate
+
+
+def _documented_by(function: Callable) -> Callable:
+    """Give a method that forwards to the runtime ``function`` (whose first parameter is
+    the model) that function's signature, its model becoming ``self``, and its docstring:
+    ``help()`` and :func:`inspect.signature` on a generated package's ``integrate`` and
+    ``solve_bvp`` then name every option, from the one source that implements them."""
+    signature = inspect.signature(function)
+    first, *rest = signature.parameters.values()
+
+    def decorate(method: Callable) -> Callable:
+        method.__signature__ = signature.replace(parameters=[first.replace(name="self"), *rest])
+        method.__doc__ = function.__doc__
+        return method
+    return decorate
 
 
 class CompiledModel:
@@ -52,13 +68,16 @@ class CompiledModel:
     def params(self, given=None) -> np.ndarray:
         return arguments.parameters(self.parameter_names, self.parameter_defaults, given)
 
-    def evaluate(self, kernel: str, z, h: float, params=None) -> tuple[np.ndarray, ...]:
+    def evaluate(self, kernel: str, z, h: float,
+                 params: Mapping[str, float] | None = None) -> tuple[np.ndarray, ...]:
         """Evaluate one compiled kernel at stencil coordinates ``z``.
 
-        Kernels: ``step`` (residual, ∂R/∂f_{K−1}), ``stencil`` (residual, ∂R/∂z),
+        ``kernel``: ``step`` (residual, ∂R/∂f_{K−1}), ``stencil`` (residual, ∂R/∂z),
         ``predict``, ``target``, ``momentum_plus``, ``momentum_minus``, ``lagrangian`` and,
-        for first-order models, ``energy``. Returns the outputs as arrays (Jacobians as
-        matrices).
+        for first-order models, ``energy`` (all of them: ``INFO["kernels"]``). ``z``: the
+        kernel's coordinates (base point, then elements; its length
+        ``INFO["kernels"][kernel]["nz"]``), ``h`` the step, ``params`` parameter overrides
+        (mapping name → value). Returns the outputs as arrays (Jacobians as matrices).
         """
         spec = self.info["kernels"].get(kernel)
         if spec is None:
@@ -119,8 +138,11 @@ class CompiledModel:
         windows = rows["f"] - width + 1
         return min(windows, rows["x"]) if self.m else windows
 
-    def momenta(self, x: np.ndarray, f: np.ndarray, h: float, params=None) -> np.ndarray:
-        """Discrete momenta at every state of a path (see :class:`StepResult`).
+    def momenta(self, x: np.ndarray, f: np.ndarray, h: float,
+                params: Mapping[str, float] | None = None) -> np.ndarray:
+        """Discrete momenta at every state of the path of base points ``x`` and elements
+        ``f`` (a result's ``x`` and ``f``; see :class:`StepResult`), step ``h``, parameter
+        overrides ``params``.
 
         F⁻L_d on windows 0 … r−1 gives states 0 … r−1; F⁺L_d on window i gives state i + r.
         """
@@ -132,22 +154,24 @@ class CompiledModel:
         states = np.concatenate([minus, plus])
         return states[:, 0, :] if r == 1 else states
 
-    def noether(self, x: np.ndarray, f: np.ndarray, h: float, params=None) -> np.ndarray | None:
+    def noether(self, x: np.ndarray, f: np.ndarray, h: float,
+                params: Mapping[str, float] | None = None) -> np.ndarray | None:
         """Conserved quantities F_Z of the declared symmetries (paper §4.4) at nodes
-        r−1, r, …, one column per name in ``info["symmetries"]``; None without symmetries."""
+        r−1, r, … of the path ``x``, ``f`` (step ``h``, parameter overrides ``params``), one
+        column per name in ``info["symmetries"]``; None without symmetries."""
         if not self.info.get("symmetries"):
             return None
         return self.along("noether", x, f, h, params)
 
+    @_documented_by(integrate)
     def integrate(self, initial, n_steps: int, h: float, params=None, **options):
-        """Step the discrete Euler–Lagrange equations; see :func:`stepping.integrate`."""
         if self.constraints:
             raise ValueError(f"model {self.name!r} has constraints with multipliers; it is "
                              f"solved as a whole trajectory: use solve_bvp")
         return integrate(self, initial, n_steps, h, params, **options)
 
+    @_documented_by(solve_bvp)
     def solve_bvp(self, start, end, n_steps: int, h: float, params=None, **options):
-        """Whole-trajectory solve with fixed end nodes; see :func:`bvp.solve_bvp`."""
         return solve_bvp(self, start, end, n_steps, h, params, **options)
 
     @property

@@ -28,6 +28,8 @@ from __future__ import annotations
 
 import enum
 import hashlib
+import os
+import secrets
 import sys
 from dataclasses import dataclass, fields
 
@@ -114,6 +116,37 @@ class _Result:
         if not self.success:
             raise NewtonError(self)
         return self
+
+    def save(self, file: str | os.PathLike) -> None:
+        """Write the result to the NumPy archive ``file`` (``numpy.load`` reads it back):
+        every array under its attribute's name — several configurations as ``g_0``,
+        ``g_1``, …, the interior point's log as ``history_mu`` and so on — the status by
+        name, the message and the scalars as 0-d arrays; absent (None) ones left out.
+        Written atomically: the archive appears whole or not at all."""
+        arrays = {}
+        for field in fields(self):
+            value = getattr(self, field.name)
+            if value is None:
+                continue
+            if isinstance(value, Status):
+                arrays[field.name] = np.array(value.name)
+            elif isinstance(value, dict):
+                arrays.update({f"{field.name}_{k}": np.asarray(v) for k, v in value.items()})
+            elif isinstance(value, tuple) and value and isinstance(value[0], np.ndarray):
+                arrays.update({f"{field.name}_{i}": v for i, v in enumerate(value)})
+            else:
+                arrays[field.name] = np.asarray(value)
+        target = os.path.abspath(os.fspath(file))
+        # beside the target (os.replace within one file system), with the umask's mode
+        temporary = f"{target}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
+        try:
+            with open(temporary, "xb") as out:
+                np.savez(out, **arrays)
+            os.replace(temporary, target)
+        except BaseException:
+            if os.path.exists(temporary):
+                os.unlink(temporary)
+            raise
 
     def __reduce__(self):
         state = {f.name: getattr(self, f.name) for f in fields(self)}

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from typing import Mapping
 
 import numpy as np
 
@@ -34,21 +35,23 @@ CHUNK_SECONDS = 0.05
 BUFFER_STEPS = 2**16
 
 
-def integrate(model, initial, n_steps: int, h: float, params=None, *, maxiter: int = 50,
+def integrate(model, initial, n_steps: int, h: float, params: Mapping[str, float] | None = None,
+              *, maxiter: int = 50,
               xtol: float = 1e-12, ftol: float = 0.0, keep_every: int = 1,
               raise_on_failure: bool = False) -> StepResult:
     """Integrate ``n_steps`` steps of the discrete Euler–Lagrange equations.
 
     Parameters
     ----------
-    model : the :class:`CompiledModel`.
     initial : the first K−1 elements. Pair groupoid: the first 2r nodes q_0, …, q_{2r−1}
         as an array (2r, n) (r the order). Matrix Lie group: ``(g_0, xi)`` with g_0 the
         initial configuration (d, d) and xi the first 2r−1 increments ξ_k (2r−1, n).
         Action groupoids and products: ``(x_0, f)`` or ``(x_0, g_0, f)`` (see
         :meth:`CompiledModel.initial_state`).
     n_steps : number of new elements to compute.
-    h : time step (> 0). params : parameter overrides (mapping name → value).
+    h : time step (> 0).
+    params : parameter overrides (mapping name → value); the others keep the defaults
+        compiled in (``INFO["defaults"]``).
     maxiter, xtol, ftol : Newton stops when ‖Δf‖∞ ≤ xtol·(1 + ‖f‖∞) or ‖R‖∞ ≤ ftol.
     keep_every : store only the nodes 0, k, 2k, … and what belongs to them (the elements
         leaving them, their momenta, energies and conserved quantities, the iterations of

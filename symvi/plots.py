@@ -1,0 +1,88 @@
+"""Plots of a result for ``symvi run --plot`` (needs matplotlib: ``pip install 'symvi[plots]'``).
+
+Three panels against time: the configuration (a pair groupoid's nodes, an action
+groupoid's base points, or on a Lie group over a point the distance ‖g₀⁻¹g − I‖_F of the
+configuration from the start), the velocities (difference quotients of the nodes, or the
+fibres ξ), and what judges the run: the energy error of a first-order integration, the
+conserved quantities' drift, or the controls of an optimal-control solve with the
+windows where a bound is active marked.
+"""
+from __future__ import annotations
+
+import os
+from typing import Any, Sequence
+
+import numpy as np
+
+
+def plot_result(result: Any, model: Any, info: dict, file: str | os.PathLike) -> None:
+    """Write the plot of ``result`` (a ``StepResult`` or ``BVPResult``) of the declared
+    ``model`` (a :class:`symvi.Model`, for the coordinates' names) compiled with metadata
+    ``info`` (the generated package's ``INFO``) to the image ``file`` (its format from the
+    suffix, e.g. ``.png``)."""
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise ValueError("--plot needs matplotlib: pip install 'symvi[plots]'") from None
+    names = [str(s) for s in model.groupoid.continuous_symbols(1)]
+    n = info["fibre_dim"]
+    fig, axes = plt.subplots(3, 1, figsize=(8, 8), sharex=True, constrained_layout=True)
+    _configuration(axes[0], result, info, names[:len(names) - n])
+    _velocities(axes[1], result, info, names[-n:])
+    _judge(axes[2], result, info)
+    axes[-1].set_xlabel("t")
+    fig.suptitle(f"{info['name']}: {result.status.name}")
+    fig.savefig(os.fspath(file), dpi=100)
+    plt.close(fig)
+
+
+def _configuration(ax, result, info: dict, names: Sequence[str]) -> None:
+    if result.x is not None and result.x.shape[1]:
+        _lines(ax, result.t[:len(result.x)], result.x, names, "configuration")
+        return
+    g = result.g[0] if isinstance(result.g, tuple) else result.g
+    d = g.shape[-1]
+    distance = np.linalg.norm(np.linalg.solve(g[0], g) - np.eye(d), axis=(1, 2))
+    ax.plot(result.t[:len(g)], distance, label="‖g₀⁻¹g − I‖")
+    ax.set_ylabel("configuration")
+    ax.legend(loc="best", fontsize="small")
+
+
+def _velocities(ax, result, info: dict, names: Sequence[str]) -> None:
+    h = float(result.t[1] - result.t[0])
+    # nodes as data (a pair groupoid): the element is the next node, the velocity its
+    # difference quotient; otherwise the fibres are the velocities (ξ on a group)
+    values = np.diff(result.x, axis=0) / h if info["node_pairs"] else result.f
+    _lines(ax, result.t[:len(values)] + h / 2, values, names, "velocity")
+
+
+def _judge(ax, result, info: dict) -> None:
+    controls = getattr(result, "controls", None)
+    energy = getattr(result, "energy", None)
+    noether = getattr(result, "noether", None)
+    if controls is not None:
+        t = result.t[1:1 + len(controls)]
+        _lines(ax, t, controls, [f"u{i + 1}" for i in range(controls.shape[1])], "controls")
+        if result.active is not None and result.active.any():
+            active = result.active.any(axis=1)
+            ax.plot(t[active], np.zeros(active.sum()), "|", color="k", label="bound active")
+            ax.legend(loc="best", fontsize="small")
+    elif energy is not None and len(energy):
+        ax.plot(result.t[:len(energy)], energy - energy[0])
+        ax.set_ylabel("E − E₀")
+    elif noether is not None and len(noether):
+        _lines(ax, result.t[:len(noether)], noether - noether[0],
+               [f"F{i + 1} − F{i + 1}(0)" for i in range(noether.shape[1])], "drift")
+    else:
+        iterations = getattr(result, "newton_iterations", getattr(result, "step_norms", None))
+        ax.plot(np.arange(len(iterations)), iterations, ".")
+        ax.set_ylabel("Newton iterations")
+
+
+def _lines(ax, t: np.ndarray, values: np.ndarray, names: Sequence[str], label: str) -> None:
+    for i in range(values.shape[1]):
+        ax.plot(t, values[:, i], label=names[i] if i < len(names) else f"{label}[{i}]")
+    ax.set_ylabel(label)
+    ax.legend(loc="best", fontsize="small")

@@ -1,0 +1,110 @@
+"""``symvi run`` and the generated packages as a new user meets them (issue 22, items 3, 4
+and 6): every option of the generated functions in their signatures and help, every flag
+of ``symvi run`` documented, ``--param``, ``--output`` and ``--plot``, and an
+optimal-control example that keeps its horizon when ``--steps`` changes.
+"""
+from __future__ import annotations
+
+import inspect
+import pydoc
+import re
+
+import numpy as np
+import pytest
+
+from symvi._runtime.bvp import solve_bvp
+from symvi._runtime.stepping import integrate
+from symvi.cli import main, parser
+from symvi.models import get
+
+PUBLIC = ("integrate", "solve_bvp", "evaluate", "momenta", "noether")
+
+
+@pytest.fixture(scope="module")
+def pendulum(compiled):
+    return compiled("pendulum")
+
+
+@pytest.mark.parametrize("name", ["pendulum", "rigid_body_oc"])
+def test_generated_functions_name_every_option(compiled, name):
+    """``inspect.signature`` of each public function of a generated package lists the
+    runtime function's every parameter (the model bound), with its default, and the
+    ``help()`` text names each of them."""
+    module = compiled(name)
+    runtime = {"integrate": integrate, "solve_bvp": solve_bvp}
+    for public in PUBLIC:
+        function = getattr(module, public)
+        parameters = inspect.signature(function).parameters
+        if public in runtime:
+            expected = list(inspect.signature(runtime[public]).parameters.values())[1:]
+            assert list(parameters.values()) == expected, public
+        doc = inspect.getdoc(function)
+        assert doc.splitlines()[0] in pydoc.render_doc(function, renderer=pydoc.plaintext)
+        for parameter in parameters:       # in the docstring, not only in the signature
+            assert re.search(rf"(?<![\w_]){parameter}(?![\w_])", doc), (public, parameter)
+    assert inspect.signature(module.integrate).parameters["xtol"].default == 1e-12
+    assert inspect.signature(module.solve_bvp).parameters["maxiter"].default == 100
+
+
+def test_every_flag_of_symvi_run_is_documented():
+    run = parser()._subparsers._group_actions[0].choices["run"]
+    for action in run._actions:
+        assert action.help, action.dest
+    text = run.format_help()
+    for flag in ("--param", "--steps", "--h", "--output", "--plot", "--build-dir",
+                 "--keep-every"):
+        assert flag in text
+
+
+def test_run_with_a_parameter_writes_the_result_and_a_plot(pendulum, build_dir, tmp_path,
+                                                          capsys):
+    """``symvi run pendulum --param l=2 --output r.npz --plot r.png``: the archive holds the
+    result's arrays, equal to those of ``integrate`` with l = 2 called directly (and not to
+    those with the default l = 1); the image is a real plot."""
+    npz, png = tmp_path / "r.npz", tmp_path / "r.png"
+    code = main(["run", "pendulum", "--build-dir", str(build_dir), "--param", "l=2",
+                 "--steps", "2000", "--output", str(npz), "--plot", str(png)])
+    out = capsys.readouterr().out
+    assert code == 0 and "params     l = 2" in out
+    ex = get("pendulum").example
+    direct = pendulum.integrate(ex.initial, 2000, ex.h, params={"l": 2.0})
+    default = pendulum.integrate(ex.initial, 2000, ex.h)
+    saved = np.load(npz)
+    assert str(saved["status"]) == "SUCCESS" and str(saved["message"]) == direct.message
+    for field in ("t", "x", "f", "newton_iterations", "momenta", "energy"):
+        np.testing.assert_array_equal(saved[field], getattr(direct, field), err_msg=field)
+    assert not np.array_equal(saved["x"], default.x)
+    plt = pytest.importorskip("matplotlib.pyplot")
+    image = plt.imread(png)
+    assert image.shape[0] >= 600 and image.shape[1] >= 600
+    ink = (image[..., :3] < 0.5).any(axis=-1).mean()
+    assert 0.01 < ink < 0.5, ink          # lines and text, not a blank or filled canvas
+
+
+def test_an_optimal_control_run_keeps_its_horizon_when_the_steps_change(build_dir,
+                                                                        tmp_path, capsys):
+    """``symvi run rigid_body_oc --steps 200`` solves on the example's horizon T = 1 (h =
+    1/200), not on 200 of the example's steps; the archive has the controls, the cost and
+    the status."""
+    npz = tmp_path / "oc.npz"
+    code = main(["run", "rigid_body_oc", "--build-dir", str(build_dir), "--steps", "200",
+                 "--output", str(npz)])
+    out = capsys.readouterr().out
+    assert code == 0 and "N = 200, h = 0.005, T = 1:" in out, out
+    saved = np.load(npz)
+    assert saved["t"][-1] == pytest.approx(1.0, abs=1e-12) and saved["t"].size == 201
+    assert saved["controls"].shape == (199, 3) and np.isfinite(saved["cost"])
+    assert str(saved["status"]) == "SUCCESS"
+
+
+@pytest.mark.parametrize("argument, message", [
+    ("length=2", "model 'pendulum' has no parameter 'length'; its parameters: ['m', 'l', 'g']"),
+    ("l=two", "--param l: expected a finite number, got 'two'"),
+    ("l=nan", "--param l: expected a finite number, got 'nan'"),
+    ("l", "--param expects NAME=VALUE, got 'l'"),
+])
+def test_a_bad_parameter_is_refused_before_anything_runs(argument, message, build_dir,
+                                                        capsys):
+    code = main(["run", "pendulum", "--build-dir", str(build_dir), "--param", argument])
+    captured = capsys.readouterr()
+    assert code == 2 and message in captured.err and "integrate" not in captured.out
