@@ -9,7 +9,9 @@ import argparse
 import importlib
 import importlib.util
 import math
+import shutil
 import sys
+import textwrap
 import time
 import warnings
 from pathlib import Path
@@ -33,6 +35,7 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 def _compile(args) -> int:
     from .build import compile_model
     model = load(args.model)
+    _warn_if_shadowed(args.model, model.name)
     start = time.perf_counter()
     with warnings.catch_warnings():
         warnings.showwarning = _show_warning
@@ -168,10 +171,29 @@ def _check(args) -> int:
 
 
 def _list(args) -> int:
+    """The bundled models, one per paragraph: the name, then its description wrapped to
+    the terminal's width under a column as wide as the longest name."""
     from .models import get
+    width = max(len(name) for name in BUNDLED) + 2
+    columns = max(shutil.get_terminal_size((100, 24)).columns, width + 30)
     for name in BUNDLED:
-        print(f"{name:22s} {get(name).description}")
+        lines = textwrap.wrap(get(name).description, columns - width) or [""]
+        print(f"{name:<{width}}{lines[0]}")
+        for line in lines[1:]:
+            print(" " * width + line)
     return 0
+
+
+def _warn_if_shadowed(spec: str, name: str) -> None:
+    """A model file named like its model (``planar_slew.py`` declaring ``planar_slew``)
+    shadows the generated package for every script run from the file's folder: ``import
+    planar_slew`` finds the file first. Say so, and how to avoid it."""
+    path = Path(spec)
+    if path.suffix == ".py" and path.stem == name:
+        _to_stderr(f"symvi: warning: the model file {path.name} is named like its model "
+                   f"{name!r}: a script run from {path.parent.resolve()} that imports "
+                   f"{name} gets this file, not the generated package (it has no "
+                   f"integrate or solve_bvp); rename the file, e.g. to {name}_model.py")
 
 
 def _seconds(text: str) -> float:

@@ -108,3 +108,21 @@ def test_a_bad_parameter_is_refused_before_anything_runs(argument, message, buil
     code = main(["run", "pendulum", "--build-dir", str(build_dir), "--param", argument])
     captured = capsys.readouterr()
     assert code == 2 and message in captured.err and "integrate" not in captured.out
+
+
+def test_solve_bvp_takes_the_step_or_the_horizon(compiled):
+    """Item 4: ``solve_bvp(start, end, N, T=...)`` is the solve at h = T/N, to the bit;
+    giving both or neither is refused."""
+    module = compiled("rigid_body_oc")
+    ex = get("rigid_body_oc").example
+    by_step = module.solve_bvp(ex.start, ex.end, 200, 1.0 / 200)
+    by_horizon = module.solve_bvp(ex.start, ex.end, 200, T=1.0)
+    assert by_horizon.success and by_horizon.T == pytest.approx(1.0, abs=1e-14)
+    np.testing.assert_array_equal(by_horizon.f, by_step.f)
+    assert by_horizon.cost == by_step.cost
+    with pytest.raises(ValueError, match="give the step h or the horizon T .*not both"):
+        module.solve_bvp(ex.start, ex.end, 200, 0.005, T=1.0)
+    with pytest.raises(ValueError, match="not neither"):
+        module.solve_bvp(ex.start, ex.end, 200)
+    with pytest.raises(ValueError, match="the horizon T must be a positive"):
+        module.solve_bvp(ex.start, ex.end, 200, T=-1.0)

@@ -79,10 +79,27 @@ def test_function_without_c_implementation_is_named_at_compile(tmp_path):
 
 
 # -- run time: undefined step maps and non-finite outputs ------------------------------------
+@pytest.fixture(scope="module")
+def unsigned_pendulum(build_dir):
+    """The pendulum with parameters declared real only, so that m = 0 and l = 0 reach the
+    solver (the bundled one declares them positive, and refuses them by name)."""
+    G = PairGroupoid("theta")
+    (theta,), (omega,) = G.q, G.qdot
+    m, l, g = sp.symbols("m l g", real=True)
+    model = Model("pendulum_unsigned", G, lagrangian=m * l**2 * omega**2 / 2
+                  + m * g * l * sp.cos(theta), parameters={m: 1.0, l: 1.0, g: 9.81})
+    return compile_model(model, build_dir)
+
+
 @pytest.mark.parametrize("params", [{"l": 0.0}, {"m": 0.0}])
-def test_undefined_step_map_is_singular_not_a_constant_path(compiled, params):
-    """L ≡ 0 (l = 0 or m = 0): every q_2 solves R = 0; that is no step map."""
-    mod = compiled("pendulum")
+def test_undefined_step_map_is_singular_not_a_constant_path(compiled, unsigned_pendulum,
+                                                            params):
+    """L ≡ 0 (l = 0 or m = 0): every q_2 solves R = 0; that is no step map. Declared
+    positive (the bundled pendulum), those values are refused before anything runs."""
+    name = next(iter(params))
+    with pytest.raises(ValueError, match=f"parameter {name} is declared positive"):
+        compiled("pendulum").integrate([[1.0], [1.0]], 100, 0.01, params=params)
+    mod = unsigned_pendulum
     result = mod.integrate([[1.0], [1.0]], 100, 0.01, params=params)
     assert result.status == mod.Status.SINGULAR_JACOBIAN, result.message
     assert "step 0" in result.message and "not defined" in result.message

@@ -443,10 +443,24 @@ def test_failed_newton_records_the_residual_of_the_returned_path(compiled):
 
 
 @pytest.mark.parametrize("params", [{"m": 0.0}, {"ell": 0.0}])
-def test_singular_cart_pole_is_a_failure_with_a_message(compiled, params):
+def test_singular_cart_pole_is_a_failure_with_a_message(compiled, build_dir, params):
     """Without a pole (m = 0 or ℓ = 0) the constraint EL(L)_θ vanishes identically: its
-    multipliers and the pole angle are undetermined, the Jacobian is singular."""
-    mod, ex = compiled("cart_pole_oc"), get("cart_pole_oc").example
+    multipliers and the pole angle are undetermined, the Jacobian is singular. The
+    bundled cart-pole declares m and ℓ positive and refuses those values by name; the
+    same problem with real parameters reaches the solver."""
+    from symvi import optimal_control
+    from symvi.build import compile_model
+    from symvi.models import cart_pole_oc as bundled
+
+    ex = get("cart_pole_oc").example
+    name = next(iter(params))
+    with pytest.raises(ValueError, match=f"parameter {name} is declared positive"):
+        compiled("cart_pole_oc").solve_bvp(ex.start, ex.end, 40, 0.05, params=params)
+    real = {s: sp.Symbol(str(s), real=True) for s in bundled.PARAMETERS}
+    model = optimal_control(
+        "cart_pole_unsigned", bundled.G, bundled.LAGRANGIAN.xreplace(real), bundled.u**2 / 2,
+        [bundled.u], actuated=[0], parameters={real[s]: v for s, v in bundled.PARAMETERS.items()})
+    mod = compile_model(model, build_dir)
     r = mod.solve_bvp(ex.start, ex.end, 40, 0.05, params=params)
     assert not r.success
     assert r.status in (mod.Status.SINGULAR_JACOBIAN, mod.Status.NON_FINITE)

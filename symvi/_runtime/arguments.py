@@ -6,6 +6,7 @@ value in a numerical argument is almost always a mistake upstream.
 """
 from __future__ import annotations
 
+import itertools
 import math
 import numbers
 from typing import Mapping, Sequence
@@ -82,6 +83,18 @@ def step_size(h) -> float:
     return h
 
 
+def step_of(h, T, steps: int) -> float:
+    """The step from exactly one of the step ``h`` and the horizon ``T`` = steps·h."""
+    if (h is None) == (T is None):
+        raise ValueError(f"give the step h or the horizon T (h = T/n_steps), not "
+                         f"{'both' if h is not None else 'neither'}")
+    if T is None:
+        return step_size(h)
+    if not _is_real(T) or not (math.isfinite(float(T)) and float(T) > 0.0):
+        raise ValueError(f"the horizon T must be a positive, finite real number, got {T!r}")
+    return float(T) / steps
+
+
 def count(value, what: str, minimum: int = 0, maximum: int = LONG_MAX, why: str = "") -> int:
     """An integer in [minimum, maximum] (maximum: what the C argument can hold); ``why``
     explains the minimum in the message."""
@@ -122,9 +135,17 @@ def _by_name(given: Mapping, names: Sequence[str]) -> dict[str, object]:
     return named
 
 
+#: What a parameter declared with a sign assumption must satisfy.
+SIGNS = {"positive": (lambda v: v > 0, "> 0"), "nonnegative": (lambda v: v >= 0, "≥ 0"),
+         "negative": (lambda v: v < 0, "< 0"), "nonpositive": (lambda v: v <= 0, "≤ 0")}
+
+
 def parameters(names: Sequence[str], defaults: Sequence[float],
-               given: Mapping[str, float] | Sequence[float] | None) -> np.ndarray:
-    """Parameter vector: defaults overridden by a name → value mapping (or a full sequence)."""
+               given: Mapping[str, float] | Sequence[float] | None,
+               signs: Sequence[str | None] = ()) -> np.ndarray:
+    """Parameter vector: defaults overridden by a name → value mapping (or a full sequence),
+    each value finite and of the sign its symbol was declared with (``signs``: a mass
+    declared ``positive=True`` cannot be −1)."""
     values = dict(zip(names, defaults))
     if given is None:
         pass
@@ -144,7 +165,12 @@ def parameters(names: Sequence[str], defaults: Sequence[float],
                              f"got {len(seq)}")
         values = dict(zip(names, seq))
     vec = np.array([real(values[n], f"parameter {n}") for n in names] or [0.0])
-    for name, v in zip(names, vec):
+    for name, v, declared in itertools.zip_longest(names, vec, signs):
+        if name is None:
+            break
         if not math.isfinite(v):
             raise ValueError(f"parameter {name} must be finite, got {v}")
+        if declared in SIGNS and not SIGNS[declared][0](v):
+            raise ValueError(f"parameter {name} is declared {declared} (its symbol's "
+                             f"assumption): it must be {SIGNS[declared][1]}, got {v:g}")
     return vec

@@ -31,8 +31,8 @@ from .results import BVPResult, Status
 from .storage import check_path_memory as check_memory
 
 
-def solve_bvp(model, start, end, n_steps: int, h: float,
-              params: Mapping[str, float] | None = None, *,
+def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
+              params: Mapping[str, float] | None = None, *, T: float | None = None,
               guess: str | np.ndarray | tuple | BVPResult | None = None,
               maxiter: int = 100, xtol: float = 1e-9, ftol: float = 0.0,
               raise_on_failure: bool = False) -> BVPResult:
@@ -45,7 +45,10 @@ def solve_bvp(model, start, end, n_steps: int, h: float,
         with both (action groupoids, products): ``(x, g)``, base points (r, m) and
         configurations (r, d, d) — a tuple of such arrays with several group factors.
         On an action groupoid the base points must follow the configurations.
-    n_steps : N, the number of elements (N + 1 nodes).
+    n_steps : N, the number of elements: N + 1 nodes t_k = k·h, k = 0 … N, on [0, T].
+    h, T : the step h, or the horizon T = N·h (keyword; give one of them). With a free
+        horizon (``optimal_control(..., time_cost=ρ)``) the first guess of it, the
+        result's ``T`` (``t[-1]``) the optimal horizon (:mod:`.horizon`).
     params : parameter overrides (mapping name → value); the others keep the defaults
         compiled in (``INFO["defaults"]``).
     guess : the free nodes r … N−r in the same layout, or how to interpolate them between
@@ -82,8 +85,6 @@ def solve_bvp(model, start, end, n_steps: int, h: float,
         other problems and the last steps by backtracking on ‖R‖₂. With inequalities
         (bounded controls) the solve is a primal–dual interior-point Newton
         (:mod:`.interior`, whose docstring states its SUCCESS rule); ``ftol`` is unused.
-    h : the step; with a free horizon (``optimal_control(..., time_cost=ρ)``) the first
-        guess of it, the result's ``t[-1]`` the optimal horizon (:mod:`.horizon`).
     raise_on_failure : raise :class:`NewtonError` (carrying the failed result and its
         iteration history) instead of returning a failed result.
     """
@@ -95,7 +96,7 @@ def solve_bvp(model, start, end, n_steps: int, h: float,
     N = arguments.count(n_steps, "n_steps", 2 * r, why=(
         f" ({r} fixed node{'s' if r > 1 else ''} at each end of an order-{r} problem and at "
         f"least one free node between them)"))
-    h, p = arguments.step_size(h), model.params(params)
+    h, p = arguments.step_of(h, T, N), model.params(params)
     xtol, ftol = arguments.tolerance(xtol, "xtol"), arguments.tolerance(ftol, "ftol")
     maxiter = arguments.iterations(maxiter)
     check_memory(model, N)

@@ -66,7 +66,8 @@ class CompiledModel:
         return self.ffi.from_buffer("double[]", array)
 
     def params(self, given=None) -> np.ndarray:
-        return arguments.parameters(self.parameter_names, self.parameter_defaults, given)
+        return arguments.parameters(self.parameter_names, self.parameter_defaults, given,
+                                    self.info.get("parameter_signs", ()))
 
     def evaluate(self, kernel: str, z, h: float,
                  params: Mapping[str, float] | None = None) -> tuple[np.ndarray, ...]:
@@ -171,7 +172,8 @@ class CompiledModel:
         return integrate(self, initial, n_steps, h, params, **options)
 
     @_documented_by(solve_bvp)
-    def solve_bvp(self, start, end, n_steps: int, h: float, params=None, **options):
+    def solve_bvp(self, start, end, n_steps: int, h: float | None = None, params=None,
+                  **options):
         return solve_bvp(self, start, end, n_steps, h, params, **options)
 
     @property

@@ -230,7 +230,11 @@ class BVPResult(_Result):
         time), ``primal`` and ``dual`` infeasibility, ``complementarity`` (max s·z) and
         ``alpha`` (step length; 0 where μ fell), like IPOPT's log; else None.
     cost : Σ_k L_d over the windows — the discrete cost J_d of an optimal-control problem,
-        the action sum otherwise.
+        the action sum otherwise. A window of a second-order problem spans nodes k … k+2
+        and weighs its integrand by h at node k+1, so J_d is a midpoint sum over
+        [h/2, T − h/2]: it differs from ∫₀ᵀ by the two end half-windows, O(h) where the
+        integrand does not vanish at the ends (a rest-to-rest slew starts and ends with
+        its largest torques).
     iterations : Newton iterations taken.
     residual_norms : max-norm of the residual before each iteration and at the end.
     step_norms : max-norm of each Newton update actually taken (after line search).

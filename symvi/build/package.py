@@ -18,6 +18,7 @@ from ..derivation.derive import DerivedModel
 from ..codegen.emit import CSource, environment
 from ..errors import BuildError
 from .files import write_file, writing
+from ..declaration.symbols import sign
 
 #: The symvi package folder (its sources are part of the cache key).
 PACKAGE = Path(__file__).resolve().parent.parent
@@ -64,7 +65,8 @@ def info(dm: DerivedModel, key: str, description: str) -> dict:
     return {
         "name": dm.name, "kind": dm.kind, "order": dm.order, "source_dim": dm.source_dim,
         "fibre_dim": dm.fibre_dim, "parameters": [str(s) for s in dm.parameters],
-        "defaults": list(dm.defaults), "has_energy": dm.has_energy,
+        "defaults": list(dm.defaults),
+        "parameter_signs": [sign(s) for s in dm.parameters], "has_energy": dm.has_energy,
         "node_pairs": dm.node_pairs,
         "whole_trajectory": dm.whole_trajectory, "constraints": dm.constraint_count,
         "controls": dm.control_count, "inequalities": list(dm.inequality_names),

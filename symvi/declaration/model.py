@@ -15,7 +15,7 @@ from typing import Any, Mapping, Sequence
 
 import sympy as sp
 
-from .symbols import h
+from .symbols import SIGNS, h, sign
 from ..errors import ModelError
 from ..groupoids.base import Groupoid
 from .rank import generic_rank
@@ -55,6 +55,10 @@ def _sympify_parameters(parameters: Mapping[Any, float]) -> tuple[tuple[sp.Symbo
             raise ModelError(f"parameter {symbol} has a non-numeric default {value!r}") from None
         if not math.isfinite(default):
             raise ModelError(f"parameter {symbol} has a non-finite default {default}")
+        declared = sign(symbol)
+        if declared and not dict(SIGNS)[declared](default):
+            raise ModelError(f"parameter {symbol} is declared {declared} but its default is "
+                             f"{default}")
         items.append((symbol, default))
     names = [str(s) for s, _ in items]
     if len(set(names)) != len(names):

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import importlib
 import runpy
+import traceback
 from pathlib import Path
 
 from ..errors import ModelError
@@ -57,10 +58,29 @@ def load_with_equations(spec: str) -> tuple[Model, tuple]:
         return get(spec), ()
     if not path.is_file():
         raise ModelError(f"model file {spec!r} does not exist")
-    namespace = runpy.run_path(str(path))
+    namespace = _run_model_file(path, spec)
     model = namespace.get("model")
     if not isinstance(model, Model):
         found = [k for k, v in namespace.items() if isinstance(v, Model)]
         hint = f" (found Model objects named {found})" if found else ""
         raise ModelError(f"model file {spec!r} must define `model = symvi.Model(...)`{hint}")
     return model, tuple(namespace.get("equations", ()))
+
+
+def _run_model_file(path: Path, spec: str) -> dict:
+    """The namespace of the model file ``path``; a syntax error or an exception in it is a
+    :class:`ModelError` naming the file and line (a ModelError of its own passes)."""
+    try:
+        return runpy.run_path(str(path))
+    except ModelError:
+        raise
+    except SyntaxError as exc:
+        text = f": {exc.text.strip()}" if exc.text and exc.text.strip() else ""
+        raise ModelError(f"model file {spec!r}: syntax error at line {exc.lineno}: "
+                         f"{exc.msg}{text}") from None
+    except Exception as exc:
+        lines = [frame.lineno for frame in traceback.extract_tb(exc.__traceback__)
+                 if Path(frame.filename).resolve() == path.resolve()]
+        where = f" at line {lines[-1]}" if lines else ""
+        raise ModelError(f"model file {spec!r} raised {type(exc).__name__}{where}: "
+                         f"{exc}") from exc
