@@ -4,6 +4,6 @@ Depends on numpy (and cffi through the extension) only; SciPy is imported lazily
 whole-trajectory solver. Never imports SymPy or symvi.
 """
 from .compiled import CompiledModel
-from .results import BVPResult, NewtonError, Status, StepResult
+from .results import BVPResult, NewtonError, State, Status, StepResult
 
-__all__ = ["CompiledModel", "NewtonError", "StepResult", "BVPResult", "Status"]
+__all__ = ["CompiledModel", "NewtonError", "State", "StepResult", "BVPResult", "Status"]

@@ -96,6 +96,22 @@ def _brief(values) -> str:
                            separator=", ", max_line_width=10**6).replace("\n", "")
 
 
+@dataclass(frozen=True)
+class State:
+    """A state to start :func:`integrate` from instead of its first nodes (first-order
+    models): the velocity ``v`` — q̇ on a pair groupoid, the body velocity ξ = g⁻¹ġ on a
+    matrix Lie group — at the position ``x`` (a pair groupoid's q₀, an action groupoid's
+    base point; none on a Lie group) and the configuration ``g`` (a (d, d) matrix, a
+    sequence of them with several group factors; the identity by default). The first
+    element is the one whose discrete momentum F⁻L_d equals the continuous one ∂L/∂v at
+    the state (the discrete Legendre transform), so that the path approximates the
+    solution from that state at the method's order, whatever the step."""
+
+    v: object
+    x: object = None
+    g: object = None
+
+
 class _Result:
     """What both result classes share: status checks, pickling and a short repr."""
 
@@ -280,7 +296,7 @@ class BVPResult(_Result):
 
 
 #: The names every copy of this file takes from the canonical module.
-SHARED = ("Status", "NewtonError", "StepResult", "BVPResult", "_rebuild")
+SHARED = ("Status", "NewtonError", "State", "StepResult", "BVPResult", "_rebuild")
 
 
 def _share() -> None:

@@ -14,7 +14,7 @@ from typing import Mapping
 import numpy as np
 
 from . import arguments
-from .results import Status, StepResult
+from .results import State, Status, StepResult
 from .storage import Series, check_memory
 
 _FAILURE = {
@@ -43,12 +43,17 @@ def integrate(model, initial, n_steps: int, h: float, params: Mapping[str, float
 
     Parameters
     ----------
-    initial : the first K−1 elements. Pair groupoid: the first 2r nodes q_0, …, q_{2r−1}
-        as an array (2r, n) (r the order). Matrix Lie group: ``(g_0, xi)`` with g_0 the
-        initial configuration (d, d) and xi the first 2r−1 increments ξ_k (2r−1, n).
-        Action groupoids and products: ``(x_0, f)`` or ``(x_0, g_0, f)`` (see
-        :meth:`CompiledModel.initial_state`).
-    n_steps : number of new elements to compute.
+    initial : a :class:`State` (first-order models): ``State(x=q0, v=v0)`` on a pair
+        groupoid, ``State(g=g0, v=xi0)`` on a Lie group, ``State(x=x0, g=g0, v=xi0)`` on
+        an action groupoid — the first element from the discrete Legendre transform
+        (:mod:`.legendre`). Or the first K−1 elements themselves. Pair groupoid: the
+        first 2r nodes q_0, …, q_{2r−1} as an array (2r, n) (r the order). Matrix Lie
+        group: ``(g_0, xi)`` with g_0 the initial configuration (d, d) and xi the first
+        2r−1 increments ξ_k (2r−1, n). Action groupoids and products: ``(x_0, f)`` or
+        ``(x_0, g_0, f)`` (see :meth:`CompiledModel.initial_state`).
+    n_steps : from a State, the number of steps: n_steps + 1 nodes on [0, n_steps·h]
+        (the first element, from the transform, is the first step). From elements, the
+        number of new elements to compute after them.
     h : time step (> 0).
     params : parameter overrides (mapping name → value); the others keep the defaults
         compiled in (``INFO["defaults"]``).
@@ -68,12 +73,15 @@ def integrate(model, initial, n_steps: int, h: float, params: Mapping[str, float
     within a few iterations instead of iterating to ``maxiter``. Ctrl-C stops a run
     within a fraction of a second (``KeyboardInterrupt``).
     """
-    n_steps = arguments.count(n_steps, "n_steps")
+    from_state = isinstance(initial, State)
+    n_steps = arguments.count(n_steps, "n_steps", int(from_state))
     keep = arguments.count(keep_every, "keep_every", 1)
     h = arguments.step_size(h)
     maxiter = arguments.iterations(maxiter)
     xtol, ftol = arguments.tolerance(xtol, "xtol"), arguments.tolerance(ftol, "ftol")
-    (z0, g0), p = model.initial_state(initial), model.params(params)
+    p = model.params(params)
+    z0, g0 = model.initial_state(initial, h, p)
+    n_steps -= from_state           # the transform's element was the first step
     K = model.stencil_elements
     check_memory(model, K - 1 + n_steps, keep, BUFFER_STEPS if keep > 1 else 0)
     run = _Run(model, n_steps, keep, p, h)

@@ -473,10 +473,27 @@ def _step_kernels(dm: DiscreteModel, engine: _Engine, full: _Stencil,
         Kernel("momentum_plus", half.z, (("momentum", p_plus),),
                "F⁺L_d: momenta at the last r nodes from the 2r−1 elements before them",
                half.definitions),
-        Kernel("momentum_minus", half.z, (("momentum", p_minus),),
-               "F⁻L_d: momenta at the first r nodes from the 2r−1 elements after them",
-               half.definitions),
-    ]
+        Kernel("momentum_minus", half.z, (("momentum", p_minus),)
+               + ((("jacobian", half.total_jacobian(p_minus)),) if r == 1 else ()),
+               "F⁻L_d: momenta at the first r nodes from the 2r−1 elements after them "
+               "(first order: and ∂/∂z, for the discrete Legendre transform of a state)",
+               half.definitions + (half.jacobian_definitions if r == 1 else ())),
+    ] + _legendre(dm, r)
+
+
+def _legendre(dm: DiscreteModel, r: int) -> list[Kernel]:
+    """The continuous Legendre transform p = ∂L/∂v at a state (x, v) of a first-order
+    model — the groupoid's first-order symbols: base coordinates, then the velocity (q̇,
+    or ξ on a group) — whose matching F⁻L_d(x₀, f₀) = p gives the first element of a run
+    started from a state (:meth:`.compiled.CompiledModel.initial_state`)."""
+    L = dm.continuous_lagrangian
+    if r != 1 or L is None:
+        return []
+    symbols = tuple(dm.groupoid.continuous_symbols(1))
+    velocity = symbols[len(symbols) - dm.groupoid.fibre_dim:]
+    momentum = sp.Matrix([sp.diff(L, v) for v in velocity])
+    return [Kernel("legendre", symbols, (("momentum", momentum),),
+                   "∂L/∂v at a state (base coordinates, velocity)", along=False)]
 
 
 def step_jacobian(dm: DiscreteModel) -> tuple[sp.Matrix, _Stencil]:
