@@ -51,8 +51,12 @@ KAPPA_EPSILON = 10.0
 #: Iterations over which the KKT correction must halve to count as still converging.
 STAGNATION = 6
 #: Penalties ρ (times W's scale over |∇c_j|²) on the active inequalities in the final
-#: second-order test, and the cap on Σ in the iteration's inertia test (×10⁶).
-PENALTIES, CAP = (0.0, 1.0, 1e2, 1e4, 1e6), 1e6
+#: second-order test, and the cap on Σ in the iteration's inertia test (×10⁶). No more
+#: than 10² of W's scale: the Cholesky factorisation's rounding grows as ε·ρ·‖W‖, and at
+#: 10⁶ it hid a negative reduced eigenvalue (a hunt's false SUCCESS: the cart-pole at
+#: N = 150 from the chord guess, a saddle of cost 32.3576 with reduced eigenvalue −0.197
+#: accepted; capped, the solve goes on to the minimum 32.3515, smallest eigenvalue +4.4).
+PENALTIES, CAP = (0.0, 1.0, 1e2), 1e6
 
 
 class InteriorPoint:
