@@ -144,10 +144,7 @@ def _parameters(given: list[str] | None, model) -> dict[str, float]:
         if name not in known:
             raise ValueError(f"--param {name}: model {model.name!r} has no parameter "
                              f"{name!r}; its parameters: {known or 'none'}")
-        try:
-            value = float(text)
-        except ValueError:
-            value = math.nan
+        value = _number(text)
         if not math.isfinite(value):
             raise ValueError(f"--param {name}: expected a finite number, got {text!r}")
         out[name] = value
@@ -196,12 +193,17 @@ def _warn_if_shadowed(spec: str, name: str) -> None:
                    f"integrate or solve_bvp); rename the file, e.g. to {name}_model.py")
 
 
+def _number(text: str) -> float:
+    """``text`` as a float, NaN where it is not a number."""
+    try:
+        return float(text)
+    except ValueError:
+        return math.nan
+
+
 def _seconds(text: str) -> float:
     """``--timeout``'s value: a positive, finite number of seconds."""
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
+    value = _number(text)
     if not (value > 0 and math.isfinite(value)):
         raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
     return value

@@ -64,6 +64,22 @@ def assert_feasible_and_complementary(prob, r, label: str) -> None:
     assert np.abs(r.bound_multipliers * c).max() <= 1e-9, label
 
 
+def solve_each(module, prob, guesses: dict, **options) -> tuple[dict, dict]:
+    """({label: cost} of the SUCCESSes, each feasible and complementary in independent
+    code; {label: status} of the failures, each with a message) of the solves of ``prob``
+    from ``guesses``."""
+    costs, failures = {}, {}
+    for label, guess in guesses.items():
+        r = module.solve_bvp(*prob.boundary, prob.N, prob.h, guess=guess, **options)
+        if not r.success:
+            assert r.message and r.status.name != "SUCCESS"
+            failures[label] = r.status.name
+            continue
+        assert_feasible_and_complementary(prob, r, label)
+        costs[label] = r.cost
+    return costs, failures
+
+
 @pytest.fixture(scope="module")
 def cart_pole(compiled):
     return get(NAME), compiled(NAME)
@@ -125,15 +141,7 @@ def test_every_success_from_perturbed_guesses_is_a_feasible_minimum(cart_pole):
     N = 100
     prob = BoundedSwingUp(model, N, 14.0, 0.8)
     guesses = {"cubic": None} | battery.guesses(module, NAME, N, count=10)
-    costs, failures = {}, {}
-    for label, guess in guesses.items():
-        r = module.solve_bvp(*prob.boundary, N, prob.h, guess=guess, maxiter=200)
-        if not r.success:
-            assert r.message and r.status.name != "SUCCESS"
-            failures[label] = r.status.name
-            continue
-        assert_feasible_and_complementary(prob, r, label)
-        costs[label] = r.cost
+    costs, failures = solve_each(module, prob, guesses, maxiter=200)
     print(f"\n{len(costs)} of {len(guesses)} succeeded; failures {failures}; costs "
           f"{sorted(set(round(v, 8) for v in costs.values()))}")
     assert not failures, failures       # 11 of 13 before the slack reset
@@ -161,15 +169,7 @@ def test_converges_at_a_thousand_steps_from_the_default_and_ten_perturbed_guesse
     prob = BoundedSwingUp(model, N, 14.0, 0.8)
     perturbed = battery.guesses(module, NAME, N, count=10)
     guesses = {"cubic": None} | {k: v for k, v in perturbed.items() if k.startswith("perturbed")}
-    costs, failures = {}, {}
-    for label, guess in guesses.items():
-        r = module.solve_bvp(*prob.boundary, N, prob.h, guess=guess)
-        if not r.success:
-            assert r.status.name != "SUCCESS" and r.message
-            failures[label] = r.status.name
-            continue
-        assert_feasible_and_complementary(prob, r, label)
-        costs[label] = r.cost
+    costs, failures = solve_each(module, prob, guesses)
     print(f"\nN = {N}: {len(costs)} of 11, costs {sorted(set(round(v, 8) for v in costs.values()))}; "
           f"failures {failures}")
     assert "cubic" in costs and len(costs) >= 10

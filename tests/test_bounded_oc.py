@@ -92,17 +92,22 @@ def assert_same_optimum_as_slsqp(prob, z, r, seed: int, equalities) -> None:
     np.testing.assert_array_equal(r.active, prob.values(z_opt) > -1e-6)
 
 
+def complex_step_gradient(fun, z: np.ndarray, chunks: int = 8) -> np.ndarray:
+    """The gradient (Jacobian transposed, one row per unknown) of a batch-capable, real-
+    analytic ``fun`` at ``z`` by complex step, the unit directions in ``chunks`` batches."""
+    from test_independent_optimum import CS
+    return np.concatenate([fun(z[None, :] + 1j * CS * chunk).imag / CS
+                           for chunk in np.array_split(np.eye(z.size), chunks)])
+
+
 def relative_stationarity(prob, z, mult, equalities, chunks: int = 8) -> float:
     """‖∇(S + z·c) + Aᵀν‖∞ / ‖∇S‖∞ at the unknowns ``z`` of the NumPy problem ``prob``,
     the bound multipliers ``mult`` symvi's and the multipliers ν of ``equalities(v)``
     (one column per equation) fitted by least squares; gradients by complex step over
     every unknown, in ``chunks`` batches: a KKT point's stationarity checked in
     independent code."""
-    from test_independent_optimum import CS
-
     def gradient(fun):
-        return np.concatenate([fun(z[None, :] + 1j * CS * chunk).imag / CS
-                               for chunk in np.array_split(np.eye(z.size), chunks)])
+        return complex_step_gradient(fun, z, chunks)
 
     lagrangian = gradient(lambda v: prob.cost(v) + (mult * prob.values(v)).sum((-2, -1)))
     cost = gradient(prob.cost)

@@ -14,18 +14,16 @@ from scipy.linalg import null_space
 
 from symvi.models import get
 from test_bounded_cart_pole import NAME, BoundedSwingUp
-from test_independent_optimum import CS
+from test_bounded_oc import complex_step_gradient
 
 
 def reduced_eigenvalues(prob, r) -> np.ndarray:
     """Eigenvalues of Zᵀ∇²ℒ Z, ℒ = S + z·c + ν·Φ (ν fitted), Z spanning the null space of
     the gradients of Φ and of the active inequalities, at symvi's path."""
     z, mult = prob.from_symvi(r), r.bound_multipliers
-    n = z.size
 
     def grad(f, x):
-        return np.concatenate([f(x[None] + 1j * CS * E).imag / CS
-                               for E in np.array_split(np.eye(n), 4)])
+        return complex_step_gradient(f, x, 4)
 
     def phi(v):
         return prob.phi(v)[..., 0]

@@ -6,7 +6,6 @@ value in a numerical argument is almost always a mistake upstream.
 """
 from __future__ import annotations
 
-import itertools
 import math
 import numbers
 from typing import Mapping, Sequence
@@ -135,7 +134,8 @@ def _by_name(given: Mapping, names: Sequence[str]) -> dict[str, object]:
     return named
 
 
-#: What a parameter declared with a sign assumption must satisfy.
+#: What a parameter declared with a sign assumption must satisfy, strongest first (the
+#: declaration reads its symbols' assumptions in this order: ``declaration.symbols.sign``).
 SIGNS = {"positive": (lambda v: v > 0, "> 0"), "nonnegative": (lambda v: v >= 0, "≥ 0"),
          "negative": (lambda v: v < 0, "< 0"), "nonpositive": (lambda v: v <= 0, "≤ 0")}
 
@@ -165,9 +165,9 @@ def parameters(names: Sequence[str], defaults: Sequence[float],
                              f"got {len(seq)}")
         values = dict(zip(names, seq))
     vec = np.array([real(values[n], f"parameter {n}") for n in names] or [0.0])
-    for name, v, declared in itertools.zip_longest(names, vec, signs):
-        if name is None:
-            break
+    declared_signs = dict(zip(names, signs))
+    for name, v in zip(names, vec):
+        declared = declared_signs.get(name)
         if not math.isfinite(v):
             raise ValueError(f"parameter {name} must be finite, got {v}")
         if declared in SIGNS and not SIGNS[declared][0](v):

@@ -86,13 +86,20 @@ class CompiledModel:
         if spec is None:
             raise ValueError(f"unknown kernel {kernel!r}; known: {sorted(self.info['kernels'])}")
         z = arguments.finite_array(z, (spec["nz"],), f"stencil z of kernel {kernel!r}")
-        p, h = self.params(params), arguments.step_size(h)
-        outs = [np.zeros(size) for size in spec["outputs"]]
-        getattr(self.lib, f"symvi_{kernel}")(self.ptr(z), self.ptr(p), h,
-                                             *[self.ptr(o) for o in outs])
+        outs = self.kernel_outputs(kernel, z, self.params(params), arguments.step_size(h))
         if len(outs) == 2:
             outs[1] = outs[1].reshape(outs[0].size, -1)
         return tuple(outs)
+
+    def kernel_outputs(self, kernel: str, z: np.ndarray, p: np.ndarray,
+                       h: float) -> list[np.ndarray]:
+        """The flat outputs of the compiled ``kernel`` at the float64 coordinates ``z``,
+        the parameter vector ``p`` already assembled (:meth:`params`) and ``h`` checked:
+        :meth:`evaluate` without its argument checks, for the runtime's own calls."""
+        outs = [np.zeros(size) for size in self.info["kernels"][kernel]["outputs"]]
+        getattr(self.lib, f"symvi_{kernel}")(self.ptr(np.ascontiguousarray(z)), self.ptr(p),
+                                             h, *[self.ptr(o) for o in outs])
+        return outs
 
     def along(self, kernel: str, x: np.ndarray, f: np.ndarray, h: float, params=None,
               windows: int | None = None) -> np.ndarray:

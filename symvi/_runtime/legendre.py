@@ -25,15 +25,14 @@ from .geometry import check_base_points
 MAXITER, XTOL = 30, 1e-14
 
 
-def first_element(model, state, h: float, p: np.ndarray) -> tuple[np.ndarray, object]:
-    """(x₀, f₀, configurations ``state.g`` as given) of the run from ``state`` (a
+def first_element(model, state, h: float, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(x₀, f₀): the base point and the first element's fibre of the run from ``state`` (a
     :class:`.results.State`) at step ``h`` and parameter vector ``p``."""
     if model.order != 1 or "legendre" not in model.info["kernels"]:
         raise ValueError(f"model {model.name!r}: a State starts first-order models only "
                          f"(this one is of order {model.order}); give its first "
                          f"{model.stencil_elements - 1} elements instead")
-    scaled = model.step_scaled
-    if not (model.info["node_pairs"] or scaled.all()):
+    if not (model.info["node_pairs"] or model.step_scaled.all()):
         raise ValueError(f"model {model.name!r}: a State needs every fibre coordinate to be "
                          f"a node (pair groupoid) or an increment (groups); give the first "
                          f"element instead")
@@ -41,10 +40,10 @@ def first_element(model, state, h: float, p: np.ndarray) -> tuple[np.ndarray, ob
     x = arguments.finite_array(state.x if model.m else [], (model.m,), "the state's position x")
     if model.m:
         check_base_points(model, x[None, :], "the state's position x")
-    momentum = _call(model, "legendre", np.concatenate([x, v]), p, h)[0]
+    momentum = model.kernel_outputs("legendre", np.concatenate([x, v]), p, h)[0]
     f = x + h * v if model.info["node_pairs"] else v.copy()
     for _ in range(MAXITER):
-        value, jacobian = _call(model, "momentum_minus", np.concatenate([x, f]), p, h)
+        value, jacobian = model.kernel_outputs("momentum_minus", np.concatenate([x, f]), p, h)
         J = jacobian.reshape(model.n, model.m + model.n)[:, model.m:]
         try:
             delta = np.linalg.solve(J, momentum - value)
@@ -60,10 +59,3 @@ def first_element(model, state, h: float, p: np.ndarray) -> tuple[np.ndarray, ob
                      f"{MAXITER} Newton iterations at h = {h:g} (the velocity too large for "
                      f"the step?); take a smaller h or give the first element")
 
-
-def _call(model, kernel: str, z: np.ndarray, p: np.ndarray, h: float) -> list[np.ndarray]:
-    """The outputs of a compiled kernel at ``z`` (parameter vector ``p`` as assembled)."""
-    outs = [np.zeros(size) for size in model.info["kernels"][kernel]["outputs"]]
-    getattr(model.lib, f"symvi_{kernel}")(model.ptr(np.ascontiguousarray(z)), model.ptr(p),
-                                          h, *[model.ptr(o) for o in outs])
-    return outs

@@ -15,7 +15,8 @@ from typing import Any, Mapping, Sequence
 
 import sympy as sp
 
-from .symbols import SIGNS, h, sign
+from .._runtime.arguments import SIGNS
+from .symbols import h, sign
 from ..errors import ModelError
 from ..groupoids.base import Groupoid
 from .rank import generic_rank
@@ -56,7 +57,7 @@ def _sympify_parameters(parameters: Mapping[Any, float]) -> tuple[tuple[sp.Symbo
         if not math.isfinite(default):
             raise ModelError(f"parameter {symbol} has a non-finite default {default}")
         declared = sign(symbol)
-        if declared and not dict(SIGNS)[declared](default):
+        if declared and not SIGNS[declared][0](default):
             raise ModelError(f"parameter {symbol} is declared {declared} but its default is "
                              f"{default}")
         items.append((symbol, default))

@@ -3,16 +3,13 @@ from __future__ import annotations
 
 import sympy as sp
 
+from .._runtime.arguments import SIGNS
+
 #: The time step. It is a run-time argument of every generated function.
 h = sp.Symbol("h", positive=True)
 
 
-#: The sign assumptions of a parameter symbol that its values must meet, strongest first.
-SIGNS = (("positive", lambda v: v > 0), ("nonnegative", lambda v: v >= 0),
-         ("negative", lambda v: v < 0), ("nonpositive", lambda v: v <= 0))
-
-
 def sign(symbol: sp.Symbol) -> str | None:
     """The strongest sign assumption of ``symbol`` (``m = sp.Symbol("m", positive=True)``:
-    "positive"), or None."""
-    return next((name for name, _ in SIGNS if getattr(symbol, f"is_{name}")), None)
+    "positive") among those the run time checks (``_runtime.arguments.SIGNS``), or None."""
+    return next((name for name in SIGNS if getattr(symbol, f"is_{name}")), None)
