@@ -23,6 +23,7 @@ from .barrier import check_boundary_data
 from .gauge import check_boundary
 from .horizon import free_horizon
 from .bounded import bounded
+from .diagnosis import diagnose
 from .globalisation import descent_step, line_search, natural_step
 from .optimality import second_order
 from .penalty import infeasibility, nearly_feasible
@@ -137,7 +138,7 @@ def _fixed_horizon(model, start, end, N: int, h: float, p, guess, maxiter: int,
         message = (f"converged in {len(steps)} Newton iterations, residual norm "
                    f"{norms[-1]:.3e}{context}{message}")
     else:
-        message += f"; residual norm {norms[-1]:.3e}" + _conditioning(problem, path, status)
+        message += f"; residual norm {norms[-1]:.3e}" + _why(problem, path, status)
     result = _result(model, path, p, h, dict(
         t=h * np.arange(N + 1), iterations=len(steps), residual_norms=np.array(norms),
         step_norms=np.array(steps), status=status, message=message))
@@ -218,6 +219,16 @@ NOISE = 10.0
 #: Below this many steps a Newton matrix singular to working precision is not the
 #: conditioning's growth with N (heavy_top_rotors_oc_variational at N = 4: 1/κ = 0).
 FEW_STEPS = 50
+
+
+def _why(problem: Problem, path: Path, status: Status) -> str:
+    """Why Newton failed, for its message: the constraints (:mod:`.diagnosis`: dependent,
+    or not to be met), else double precision (:func:`_conditioning`)."""
+    if status in (Status.SINGULAR_JACOBIAN, Status.STALLED, Status.MAX_ITERATIONS):
+        found = diagnose(problem, path)
+        if found is not None:
+            return found.describe(path.x.shape[0] - 1, problem.h)
+    return _conditioning(problem, path, status)
 
 
 def _conditioning(problem: Problem, path: Path, status: Status) -> str:

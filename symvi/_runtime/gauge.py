@@ -103,7 +103,12 @@ def check_boundary(model, path, other, p, h, tol: float = 1e-9) -> None:
             raise ValueError(
                 f"the declared symmetry {name!r} is not an exact dependency of the discrete "
                 f"constraints: Σ_k Z(x_k)·Φ_d^k is {first[k]:.6e} and {second[k]:.6e} on two "
-                f"paths between the same ends (is L invariant under it? `symvi check`)")
+                f"paths between the same ends (is L invariant under it? `symvi check` says). "
+                f"Z is a section of the algebroid: on a Lie group constant coefficients Z^a, "
+                f"which move every node as g ↦ g·exp(εZ) (a body-frame symmetry); a "
+                f"world-frame (left) translation or rotation has Z = Ad_(g⁻¹) e, a function "
+                f"of the configuration — declare the model on an action groupoid whose base "
+                f"point carries it, as the heavy top's Γ = Rᵀe₃")
         if abs(first[k]) > tol * (1.0 + size[k]):
             raise ValueError(
                 f"inconsistent boundary data: the constraints conserve {name!r} (a declared "

@@ -69,6 +69,7 @@ def info(dm: DerivedModel, key: str, description: str) -> dict:
         "parameter_signs": [sign(s) for s in dm.parameters], "has_energy": dm.has_energy,
         "node_pairs": dm.node_pairs,
         "whole_trajectory": dm.whole_trajectory, "constraints": dm.constraint_count,
+        "constraint_names": list(dm.constraint_names), "unactuated": list(dm.unactuated),
         "controls": dm.control_count, "inequalities": list(dm.inequality_names),
         "boundary_inequalities": list(dm.boundary_names),
         "free_horizon": any(k.name == "horizon" for k in dm.kernels),

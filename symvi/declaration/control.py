@@ -72,6 +72,11 @@ class ControlSystem:
                          sp.srepr(self.controls), repr(self.actuated), sp.srepr(self.bounds),
                          sp.srepr(self.path_inequalities), sp.srepr(self.time_cost)])
 
+    def unactuated(self, n: int) -> tuple[int, ...]:
+        """The fibre directions no control acts on, in the order of the constraints
+        Φ^A = EL(L)_A = 0 they give (paper §3.3.2)."""
+        return tuple(A for A in range(n) if A not in self.actuated)
+
     def inequalities(self, controls: Sequence[sp.Expr], average) -> tuple[tuple[str, sp.Expr], ...]:
         """The named inequalities c ≤ 0 of one window, given its discrete controls and
         the rule's ``average`` (:func:`symvi.declaration.inequalities.discrete`)."""

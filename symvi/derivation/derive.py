@@ -80,6 +80,9 @@ class DerivedModel:
     #: Number s of constraints per window (multipliers λ^k ∈ R^s) and of controls.
     constraint_count: int = 0
     control_count: int = 0
+    #: :attr:`DiscreteModel.constraint_names`.
+    constraint_names: tuple[str, ...] = ()
+    unactuated: tuple[int, ...] = ()
     #: The inequalities c ≤ 0 per window (their count is the ``inequality`` kernel's rows).
     inequality_names: tuple[str, ...] = ()
     #: The control-free inequalities on one element (the ``boundary`` kernel's rows).
@@ -602,6 +605,7 @@ def _derive(dm: DiscreteModel) -> DerivedModel:
                         has_energy=dm.order == 1, fingerprint=dm.fingerprint,
                         node_pairs=g.elements_are_node_pairs,
                         constraint_count=len(dm.constraints), control_count=len(dm.controls),
+                        constraint_names=dm.constraint_names, unactuated=dm.unactuated,
                         inequality_names=dm.inequality_names,
                         boundary_names=dm.boundary_names,
                         step_scaled=tuple(g.step_scaled()),

@@ -39,6 +39,11 @@ class DiscreteModel:
     #: §3.2: the augmented L_d + λ_A Φ^A_d on every window).
     constraints: tuple[sp.Expr, ...] = ()
     multipliers: tuple[sp.Symbol, ...] = ()
+    #: What each constraint is, for messages: an unactuated direction's name in optimal
+    #: control (its equation EL(L)_A = 0), else "constraint k".
+    constraint_names: tuple[str, ...] = ()
+    #: In optimal control, the fibre direction A of each constraint EL(L)_A = 0.
+    unactuated: tuple[int, ...] = ()
     #: Controls at a window's quadrature point (slot coordinates).
     controls: tuple[sp.Expr, ...] = ()
     #: Declared Noether symmetries (:class:`symvi.declaration.symmetry.Symmetry`, base coordinates).
@@ -111,6 +116,8 @@ def discretise(model: "Model") -> DiscreteModel:
                          continuous_lagrangian=model.lagrangian,
                          fingerprint=model.fingerprint(), constraints=constraints,
                          multipliers=multipliers, controls=controls,
+                         constraint_names=_constraint_names(model, len(constraints)),
+                         unactuated=() if system is None else system.unactuated(g.fibre_dim),
                          symmetries=tuple(model.symmetries), gauges=gauges,
                          inequalities=tuple(c for _, c in named),
                          inequality_names=tuple(n for n, _ in named),
@@ -119,6 +126,15 @@ def discretise(model: "Model") -> DiscreteModel:
                          time_cost=None if system is None else system.time_cost,
                          boundary_inequalities=tuple(c for _, c in boundary),
                          boundary_names=tuple(n for n, _ in boundary))
+
+
+def _constraint_names(model: "Model", count: int) -> tuple[str, ...]:
+    """:attr:`DiscreteModel.constraint_names`."""
+    system = model.control_system
+    if system is None:
+        return tuple(f"constraint {k + 1}" for k in range(count))
+    names = model.groupoid.component_names()
+    return tuple(names[A] for A in system.unactuated(len(names)))
 
 
 def _on_one_element(model: "Model", system, x, f) -> tuple[tuple[str, sp.Expr], ...]:

@@ -1,0 +1,175 @@
+"""Why a whole-trajectory solve with constraints failed, where the constraints themselves
+are the cause (issue 22, item 5).
+
+An underactuated optimal-control problem carries the constraints Φ^A_d = 0 of the
+directions A no control acts on (paper §3.3.2). Newton's method fails on them in two
+ways that a user cannot tell from a stalled line search:
+
+- **Dependent constraints.** A symmetry Z of L with no actuated component makes
+  Σ_k Z(x_k)·Φ^k_d telescope to boundary terms (Noether's theorem; exactly with
+  ``equations="variational"``, to O(h⁴) with the paper's rule): the rows of A = ∂Φ_d/∂η
+  are dependent, the multipliers are not determined, and the Newton matrix is singular
+  at every N. The remedy is to declare Z, which fixes the multipliers' freedom
+  (:mod:`.gauge`).
+- **Constraints that cannot be met.** Where such a combination uᵀΦ_d has no gradient
+  (uᵀA = 0) but a value that is not zero, no Newton step changes it: the linearised
+  constraints have no solution. Where its gradient is merely small, meeting it to first
+  order takes a correction far larger than the path — the end conditions ask for motion
+  along directions no control produces (a torque-only body asked to translate).
+
+Both are read from the singular value decomposition of A at the path the solve
+returned: dense, so only up to :data:`DENSE_LIMIT` unknowns (at N ≈ 1000 for three
+fibre directions), which covers the few steps one tries first.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .optimality import _sparse
+from .paths import Path, fibres
+
+#: Most node unknowns for which the dense SVD of A is computed (O(rows · columns²)).
+DENSE_LIMIT = 3000
+#: A singular value of A within this factor of its largest is rounding: a dependency.
+DEPENDENT = 1e-9
+#: uᵀΦ_d of a dependency within this factor of A's scale times the path's size is
+#: rounding (ε·‖A‖·|path| is the noise in Φ_d itself, 10⁸ on top for the sum's terms).
+NOISE = 1e8 * np.finfo(float).eps
+#: A first-order correction of the constraints this many times the path's size (in
+#: the directions of A's smallest singular values) counts as one they cannot make.
+UNATTAINABLE = 10.0
+
+
+@dataclass(frozen=True)
+class ConstraintDiagnosis:
+    """What A = ∂Φ_d/∂η says at a failed path (module docstring)."""
+
+    #: Number of exact dependencies among the constraint rows (rank deficiency of A).
+    dependent: int
+    #: Largest |uᵀΦ_d| over the dependencies u: zero (to rounding) if consistent.
+    inconsistency: float
+    #: The first-order correction the constraints need along A's weakest directions,
+    #: over the path's size (∞ for an inconsistent dependency).
+    reach: float
+    #: The constraints (unactuated directions) that the weakest combinations involve.
+    involved: tuple[str, ...]
+    #: The boundary data's motion along those directions: (name, start-to-end mean
+    #: velocity, velocity at the start, velocity at the end), its components not all 0.
+    motion: tuple[tuple[str, float, float, float], ...]
+
+    @property
+    def unattainable(self) -> bool:
+        return self.reach > UNATTAINABLE
+
+    def describe(self, N: int, h: float) -> str:
+        """The finding and its remedy, for a failed result's message."""
+        names = ", ".join(self.involved)
+        plural = "s" if len(self.involved) > 1 else ""
+        where = f"unactuated direction{plural}" if self._controlled else f"constraint{plural}"
+        if self.unattainable:
+            how = ("cannot be met to first order: a combination of them has no gradient "
+                   f"at this path but the value {self.inconsistency:.3g}"
+                   if np.isinf(self.reach) else
+                   f"can be met to first order only by a correction {self.reach:.3g} times "
+                   f"the path's size")
+            return (f"; the constraint{plural} of the {where} {names} {how} — the end conditions "
+                    f"ask for motion that {self._produced}{self._motion(N * h)}. Change the "
+                    f"end conditions or actuate these directions")
+        return (f"; the constraints of the {where} {names} are dependent ({self.dependent} "
+                f"combination{'s' if self.dependent > 1 else ''} of them without gradient "
+                f"at this path): no path between these ends changes those combinations, "
+                f"the boundary data fix them, their multipliers are not determined and the "
+                f"Newton matrix is singular at every N. A symmetry of L that no control "
+                f"acts on does this (Noether: Σ_k Z(x_k)·Φ_d^k telescopes to the ends). "
+                f"Where Z is a section of the algebroid (constant on a Lie group, a "
+                f"function of the base point on an action groupoid), declare it — "
+                f"optimal_control(..., symmetries=[Symmetry(name, section)], "
+                f"equations=\"variational\") — and the solver fixes the multipliers' "
+                f"freedom; otherwise leave the directions no control reaches out of the "
+                f"model")
+
+    @property
+    def _controlled(self) -> bool:
+        return not any(n.startswith("constraint ") for n in self.involved)
+
+    @property
+    def _produced(self) -> str:
+        return "no control produces" if self._controlled else "the constraints forbid"
+
+    def _motion(self, T: float) -> str:
+        if not self.motion:
+            return ""
+        parts = "; ".join(f"{name}: mean {mean:.3g} over T = {T:.3g}, {a:.3g} at the start, "
+                          f"{b:.3g} at the end" for name, mean, a, b in self.motion)
+        return f" (the boundary data's velocities along them — {parts})"
+
+
+def diagnose(problem, path: Path) -> ConstraintDiagnosis | None:
+    """The :class:`ConstraintDiagnosis` of ``path``, or None where it finds nothing (no
+    dependency, no unattainable correction), the model has no constraints or declared
+    gauges, or A is too large to decompose densely."""
+    model = problem.model
+    rows = problem.constraint_rows(path) if model.constraints else None
+    if rows is None or model.info.get("gauges") or (~rows).sum() > DENSE_LIMIT:
+        return None
+    res, ab, bw, finite = problem.assemble(path, True)
+    if not finite:
+        return None
+    A = _sparse(ab, bw)[rows][:, ~rows].toarray()
+    U, s, _ = np.linalg.svd(A, full_matrices=False)
+    if not s.size or s[0] == 0.0:
+        return None
+    values = U.T @ res[rows]
+    # the nodes' scale, not the multipliers' (which a failing solve drives up)
+    size = 1.0 + max(float(np.abs(path.x).max(initial=0.0)),
+                     float(np.abs(path.g).max(initial=0.0)))
+    dependent = s <= DEPENDENT * s[0]
+    consistent = np.abs(values) <= NOISE * s[0] * size
+    with np.errstate(divide="ignore"):
+        reach = np.where(dependent, np.where(consistent, 0.0, np.inf),
+                         np.abs(values) / np.where(dependent, 1.0, s)) / size
+    weakest = dependent | (reach > UNATTAINABLE)
+    if not weakest.any():
+        return None
+    inconsistency = float(np.abs(values[dependent & ~consistent]).max(initial=0.0))
+    involved = _involved(model, U[:, weakest])
+    return ConstraintDiagnosis(int(dependent.sum()), inconsistency, float(reach.max()),
+                               tuple(model.info["constraint_names"][a] for a in involved)
+                               if "constraint_names" in model.info else
+                               tuple(f"constraint {a + 1}" for a in involved),
+                               _motion(problem, path, involved))
+
+
+def _involved(model, vectors: np.ndarray) -> list[int]:
+    """The constraint components that carry at least 5 % of the combinations' weight."""
+    s = model.constraints
+    weight = (vectors ** 2).reshape(-1, s, vectors.shape[1]).sum(axis=(0, 2))
+    return [a for a in range(s) if weight[a] >= 0.05 * weight.sum()]
+
+
+def _motion(problem, path: Path, involved: list[int]) -> tuple:
+    """Per involved unactuated direction of a group factor: the mean velocity of the element from the
+    first node to the last over T, and the boundary elements' velocities, where one is
+    not zero. Only for optimal control, whose constraints are the unactuated directions
+    in order (:attr:`ControlSystem.unactuated`)."""
+    model = problem.model
+    directions = model.info.get("unactuated")
+    if not directions:
+        return ()
+    N = path.x.shape[0] - 1
+    ends = [0, N]
+    chord = fibres(model, path.x[ends], path.g[ends], problem.p, N * problem.h,
+                   lambda _: "the start-to-end element")
+    if not isinstance(chord, np.ndarray):
+        return ()
+    out = []
+    for a in involved:
+        A = directions[a]
+        if not model.step_scaled[A]:    # a pair factor's fibre is a node, not a velocity
+            continue
+        values = (float(chord[0, A]), float(path.f[0, A]), float(path.f[-1, A]))
+        if max(map(abs, values)) > 1e-12 * (1.0 + problem.size(path)):
+            out.append((model.info["constraint_names"][a], *values))
+    return tuple(out)
