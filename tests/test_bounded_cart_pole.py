@@ -215,6 +215,11 @@ def test_a_force_limit_too_small_for_the_swing_up_is_infeasible(cart_pole):
     assert r.status.name == "INFEASIBLE" and not r.success, r.message
     assert "'u >= -u_max' at window" in r.message or "'u <= u_max' at window" in r.message
     stayed = [float(v) for v in r.message.split("stayed at ")[1].split(" as ")[0].split(", ")]
+    # the path returned is the one the message describes: its largest violation, in
+    # independent code, is the last quoted, and the violated bounds are the active ones
+    c = prob.values(prob.from_symvi(r))
+    assert abs(c.max() - stayed[-1]) <= 1e-3 * stayed[-1], (c.max(), stayed)
+    assert (r.bound_multipliers >= 0).all() and np.array_equal(r.active, c > 0)
     free = module.solve_bvp(*prob.boundary, N_SLSQP, prob.h, params=dict(u_max=1e3, d=1e3))
     assert free.success, free.message
 

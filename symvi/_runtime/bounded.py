@@ -83,6 +83,8 @@ def bounded(model, problem, path: Path, maxiter: int, xtol: float, unbounded=Non
             certificate, more = infeasibility(problem, start, maxiter, xtol)
             total += more
             if certificate is not None:
+                end = certificate.least_violation(ip.inequalities, problem)
+                ip.s = np.maximum(-ip.inequalities.values, 0.0)     # active: the violated
                 status, message = Status.INFEASIBLE, (
                     f"{certificate.describe(ip.inequalities.names, problem.h)}; the interior "
                     f"point failed: {ip.failure}")

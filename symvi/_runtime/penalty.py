@@ -28,7 +28,7 @@ hundredfold stage from 10⁴ h ran out of 200 Newton iterations.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -100,11 +100,21 @@ def nearly_feasible(problem: Problem, path: Path, newton, maxiter: int,
 class Infeasibility:
     """A local certificate that the inequalities admit no path: the largest violation of
     the penalised minimisers (``violations``, at ``penalties`` ρ/h) stopped falling, at
-    ``worst`` = (window, inequality) of the last."""
+    ``worst`` = (window, inequality) of the last, ``path``."""
 
     violations: tuple[float, ...]
     penalties: tuple[float, ...]
     worst: tuple[int, int]
+    path: Path = field(compare=False, repr=False)
+
+    def least_violation(self, inequalities: Inequalities, problem: Problem) -> Path:
+        """The last penalised minimiser, the path the certificate describes, with the
+        penalty's estimate of the bound multipliers, z = ρh·max(0, c) (its stationarity
+        is that of the Lagrangian with these z); :attr:`Inequalities.values` at it."""
+        path, s = self.path.copy(), problem.model.constraints
+        inequalities.evaluate(path, problem.p, problem.h)
+        path.lam[:, s:] = self.penalties[-1] * problem.h * np.maximum(inequalities.values, 0.0)
+        return path
 
     def describe(self, names: tuple[str, ...], h: float) -> str:
         w, k = self.worst
@@ -113,7 +123,8 @@ class Infeasibility:
                 f"ρ/2 Σ max(0, c)², the largest violation stayed at {trail} as ρ grew from "
                 f"{self.penalties[0]:.0e} h to {self.penalties[-1]:.0e} h (feasible bounds "
                 f"let it fall like 1/ρ) — a stationary point of the violation, the worst "
-                f"{names[k]!r} at window {w} (t = {(w + 1) * h:.4g}). Loosen the bounds, "
+                f"{names[k]!r} at window {w} (t = {(w + 1) * h:.4g}); the path returned is "
+                f"that last penalised minimiser. Loosen the bounds, "
                 f"lengthen the horizon, or try another guess (the certificate is local)")
 
 
@@ -141,7 +152,7 @@ def infeasibility(problem: Problem, start: Path, newton, maxiter: int,
             return None, count
     worst = np.unravel_index(int(np.argmax(inequalities.values)), inequalities.values.shape)
     return Infeasibility(tuple(violations), (STAGES[-1],) + CERTIFYING,
-                         (int(worst[0]), int(worst[1]))), count
+                         (int(worst[0]), int(worst[1])), path), count
 
 
 def _stage(problem: Problem, inequalities: Inequalities, path: Path, rho: float, newton,
