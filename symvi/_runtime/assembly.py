@@ -65,8 +65,8 @@ class Problem:
                 self._work = np.zeros_like(self._band, order="F")
             ab = self._band
             self._factored = None
-        code = m.lib.symvi_bvp_assemble(m.ptr(path.x), m.ptr(path.f), m.ptr(path.lam), n_nodes,
-                                        m.ptr(self.p), self.h, m.ptr(res),
+        code = m.lib.symvi_bvp_assemble(m.ptr(path.x), m.ptr(path.f), m.ptr(path.lam),
+                                        m.ptr(path.nu), n_nodes, m.ptr(self.p), self.h, m.ptr(res),
                                         m.ptr(ab.T) if with_jacobian else m.ffi.NULL)
         if with_jacobian and m.info.get("gauges"):
             if self.gauge is None:
@@ -148,7 +148,8 @@ class Problem:
         m, trial = self.model, path.copy()
         failed = m.ffi.new("long *")
         code = m.lib.symvi_bvp_update(m.ptr(trial.x), m.ptr(trial.g), m.ptr(trial.f),
-                                      m.ptr(trial.lam), m.ptr(delta), alpha, path.x.shape[0],
+                                      m.ptr(trial.lam), m.ptr(trial.nu), m.ptr(delta), alpha,
+                                      path.x.shape[0],
                                       m.ptr(self.p), self.h, failed)
         return trial if code == 0 else None
 
@@ -198,11 +199,11 @@ class Problem:
     def perturbed(self, path: Path) -> Path:
         """``path`` with every free node moved by a fixed pseudo-random variation of size
         1e-2 (its ends kept): a second path between the same ends."""
-        r, blocks = self.model.order, self._blocks(path)
-        delta = 1e-2 * np.random.default_rng(0).uniform(-1.0, 1.0, (len(blocks), self.model.n
-                                                                     + self.model.constraints))
-        delta[(blocks < r) | (blocks > path.x.shape[0] - 1 - r)] = 0.0
-        moved = self.moved(path, delta.reshape(-1), 1.0)
+        m, blocks = self.model, self._blocks(path)
+        delta = 1e-2 * np.random.default_rng(0).uniform(-1.0, 1.0, (len(blocks), m.n
+                                                                     + m.constraints))
+        delta[(blocks < m.order) | (blocks > path.x.shape[0] - 1 - m.order)] = 0.0
+        moved = self.moved(path, np.concatenate([delta.reshape(-1), np.zeros(m.end_count)]), 1.0)
         if moved is None:
             raise ValueError("cannot vary the initial path to check the declared symmetries")
         return moved
@@ -211,31 +212,38 @@ class Problem:
         """Scale of the unknowns for the relative step tolerance."""
         floor = 1.0 if self.model.matrix_dims else 0.0
         return max(floor, float(np.abs(path.x).max(initial=0.0)),
-                   float(np.abs(path.lam).max(initial=0.0)))
+                   float(np.abs(path.lam).max(initial=0.0)),
+                   float(np.abs(path.nu[:self.model.end_count]).max(initial=0.0)))
 
     def _blocks(self, path: Path) -> np.ndarray:
         """The nodes of the C assembler's blocks: each holds a node correction η_t (n
         unknowns, its residual rows) and, with constraints, the multipliers of window
-        t − 1 (s unknowns, the rows of its constraints Φ_d)."""
+        t − 1 (s unknowns, the rows of its constraints Φ_d). With an unknown end, to the
+        last node; the end conditions' multipliers ν follow the blocks."""
         r, s = self.model.order, self.model.constraints
         t0 = r - 1 if s else r
-        return np.arange(t0, path.x.shape[0] - t0)
+        return np.arange(t0, path.x.shape[0] - (0 if self.model.end_free else t0))
 
     def constraint_rows(self, path: Path) -> np.ndarray:
         """Mask of the multiplier unknowns (= constraint rows) in the block layout (kept
         per number of nodes: read-only)."""
-        n, s = self.model.n, self.model.constraints
+        n, s, ends = self.model.n, self.model.constraints, self.model.end_count
         count = len(self._blocks(path))
-        if self._rows is None or len(self._rows) != count * (n + s):
-            self._rows = np.tile(np.concatenate([np.zeros(n, bool), np.ones(s, bool)]), count)
+        if self._rows is None or len(self._rows) != count * (n + s) + ends:
+            self._rows = np.concatenate([np.tile(np.concatenate(
+                [np.zeros(n, bool), np.ones(s, bool)]), count), np.ones(ends, bool)])
             self._rows.flags.writeable = False
         return self._rows
 
     def multipliers(self, path: Path) -> np.ndarray:
-        """The multipliers λ in the block layout (their rows of :meth:`constraint_rows`)."""
-        if not self.model.constraints:
-            return np.zeros(0)
-        return path.lam[self._blocks(path) - 1, :self.model.constraints].reshape(-1)
+        """The multipliers λ in the block layout, then ν (their rows of
+        :meth:`constraint_rows`; a free end's last block, past the last window, 0)."""
+        s, blocks = self.model.constraints, self._blocks(path)
+        lam = np.zeros((len(blocks), s))
+        windows = blocks - 1 < path.lam.shape[0]
+        if s:
+            lam[windows] = path.lam[blocks[windows] - 1, :s]
+        return np.concatenate([lam.reshape(-1), path.nu[:self.model.end_count]])
 
     def magnitudes(self, path: Path) -> np.ndarray:
         """Magnitude of every unknown, in the block layout of the C assembler: a node
@@ -245,11 +253,15 @@ class Problem:
         blocks = self._blocks(path)
         scaled = m.step_scaled
         # blocks run from node T0 ≥ 1 to N − T0: the elements before and after each node
-        # exist, so slices (no fancy-index copies) select them
+        # exist, so slices (no fancy-index copies) select them; a free end's last node
+        # has no element after it and its block no window
         first, last = int(blocks[0]), int(blocks[-1])
         eta = np.abs(path.f[first - 1:last])
         if scaled.any():
             after = np.abs(path.f[first:last + 1])
+            after = np.concatenate([after, eta[len(after):]])
             eta[:, scaled] = self.h * np.maximum(eta[:, scaled], after[:, scaled])
         lam = np.abs(path.lam[first - 1:last, :s]) if s else np.zeros((len(blocks), 0))
-        return np.concatenate([eta, lam], axis=1).reshape(-1)
+        lam = np.concatenate([lam, np.zeros((len(blocks) - len(lam), s))])
+        return np.concatenate([np.concatenate([eta, lam], axis=1).reshape(-1),
+                               np.abs(path.nu[:m.end_count])])

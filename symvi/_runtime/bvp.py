@@ -259,6 +259,8 @@ def _result(model, path: Path, p, h, common: dict) -> BVPResult:
     return BVPResult(x=path.x if model.m else None, f=path.f,
                      g=model.configurations(path.g) if model.matrix_dims else None,
                      multipliers=path.lam if model.constraints else None,
+                     end_multipliers=path.nu[:model.end_count].copy()
+                     if model.end_count else None,
                      controls=controls, cost=cost if windows > 0 else 0.0,
                      kind=model.info["kind"], **common)
 

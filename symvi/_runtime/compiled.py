@@ -49,6 +49,9 @@ class CompiledModel:
         #: Per fibre coordinate: whether it is an increment over h (a group factor's ξ).
         self.step_scaled = np.array(info.get("step_scaled") or [False] * self.n, dtype=bool)
         self.step_scaled.flags.writeable = False
+        #: Whether the last nodes are unknowns, and the number of end conditions ψ = 0.
+        self.end_free = bool(info.get("end_free"))
+        self.end_count = len(info.get("end_conditions") or ())
         #: The inequalities c ≤ 0 of every window (bounded optimal control), by name.
         self.inequalities: tuple[str, ...] = tuple(info.get("inequalities", ()))
         self.parameter_names: tuple[str, ...] = tuple(info["parameters"])

@@ -418,5 +418,6 @@ class InteriorPoint:
             controls=model.along_vector("controls", path.x, path.f, h, p),
             cost=float(model.along_vector("lagrangian", path.x, path.f, h, p).sum()),
             kind=model.info["kind"], bound_multipliers=z, active=z > self.s,
+            end_multipliers=path.nu[:model.end_count].copy() if model.end_count else None,
             inequalities=self.inequalities.names,
             history={k: np.array(v) for k, v in self.history.items()})

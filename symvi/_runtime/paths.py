@@ -9,7 +9,7 @@ they do not.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -26,10 +26,12 @@ class Path:
     g: np.ndarray    # (nodes, Σ d²)
     f: np.ndarray    # (nodes − 1, n)
     lam: np.ndarray  # (windows, s)
+    #: The end conditions' multipliers ν (at least one number: a pointer for C).
+    nu: np.ndarray = field(default_factory=lambda: np.zeros(1))
 
     def copy(self) -> "Path":
         return replace(self, x=self.x.copy(), g=self.g.copy(), f=self.f.copy(),
-                       lam=self.lam.copy())
+                       lam=self.lam.copy(), nu=self.nu.copy())
 
 
 def _configurations(model, value, count: int, what: str) -> np.ndarray:
@@ -127,12 +129,19 @@ def initial_path(model, start, end, N: int, guess, p, h):
     them to its own, a velocity jump of O(1) whose accelerations O(1/h) put the first
     Newton iterate far from feasibility and its multipliers far from the solution's —
     ``"chord"`` matches the positions only.
+
+    With an unknown end (``model.end_free``) ``end`` is the first guess of the last r
+    nodes: by default a previous result's, else the last start node held.
     """
     r = model.order
     sx, sg = nodes(model, start, r, "start")
-    ex, eg = nodes(model, end, r, "end", N - r + 1)
-    count = N + 1 - 2 * r
     previous = guess if isinstance(guess, BVPResult) else None
+    if model.end_free and end is None:
+        ex, eg = _last_nodes(model, previous, r) if previous is not None else \
+            (np.repeat(sx[-1:], r, axis=0), np.repeat(sg[-1:], r, axis=0))
+    else:
+        ex, eg = nodes(model, end, r, "end", N - r + 1)
+    count = N + 1 - 2 * r
     if previous is not None:
         guess = _free_nodes(model, previous, N)
     if guess is None or isinstance(guess, str):
@@ -154,7 +163,20 @@ def initial_path(model, start, end, N: int, guess, p, h):
     if previous is not None:
         f, lam = _kept(model, previous, x, g, f, lam, h)
     check_consistent(model, x, f, p, h, "boundary data or guess")
-    return Path(x, g, f, lam)
+    nu = np.zeros(max(model.end_count, 1))
+    if previous is not None and previous.end_multipliers is not None \
+            and previous.end_multipliers.shape == (model.end_count,):
+        nu[:model.end_count] = previous.end_multipliers
+    return Path(x, g, f, lam, nu)
+
+
+def _last_nodes(model, previous: BVPResult, r: int) -> tuple[np.ndarray, np.ndarray]:
+    """The last r nodes (x, g) of a previous result."""
+    count = previous.t.size
+    x = previous.x[-r:] if previous.x is not None else np.zeros((r, 0))
+    g = _configurations(model, previous.g, count, "guess configurations")[-r:] \
+        if model.matrix_dims else np.zeros((r, 0))
+    return np.array(x, dtype=float), g
 
 
 def _free_nodes(model, previous: BVPResult, N: int):

@@ -242,6 +242,8 @@ class BVPResult(_Result):
     inequalities : the names of the inequalities, e.g. ``"tau1 <= tau_max"``.
     active_set : per window, the names of its active inequalities (a property).
     T : the horizon t[-1] (a property): the optimal one with a free final time.
+    end_multipliers : (P,) multipliers ν of the end conditions ψ = 0 (``end=`` of
+        :func:`symvi.optimal_control`), else None.
     history : per interior-point iteration, arrays ``mu`` (barrier parameter per unit
         time), ``primal`` and ``dual`` infeasibility, ``complementarity`` (max s·z) and
         ``alpha`` (step length; 0 where μ fell), like IPOPT's log; else None.
@@ -274,6 +276,7 @@ class BVPResult(_Result):
     active: np.ndarray | None = None
     inequalities: tuple[str, ...] = ()
     history: dict | None = None
+    end_multipliers: np.ndarray | None = None
 
     @property
     def T(self) -> float:

@@ -70,6 +70,7 @@ def info(dm: DerivedModel, key: str, description: str) -> dict:
         "node_pairs": dm.node_pairs,
         "whole_trajectory": dm.whole_trajectory, "constraints": dm.constraint_count,
         "constraint_names": list(dm.constraint_names), "unactuated": list(dm.unactuated),
+        "end_free": dm.end_free, "end_conditions": list(dm.end_names),
         "controls": dm.control_count, "inequalities": list(dm.inequality_names),
         "boundary_inequalities": list(dm.boundary_names),
         "free_horizon": any(k.name == "horizon" for k in dm.kernels),

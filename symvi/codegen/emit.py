@@ -140,6 +140,7 @@ def emit(dm: DerivedModel) -> CSource:
         "kernels": [_printed(_render_kernel, k, dm) for k in dm.kernels],
         "whole_trajectory": dm.whole_trajectory, "constraints": dm.constraint_count,
         "inequalities": len(dm.inequality_names),
+        "end_free": dm.end_free, "end_conditions": len(dm.end_names),
         "fibre_sources": list(dm.fibre_sources),
         "coefficients": [c_definition(c, ArrayPrinter({THETA: "theta"}))
                          for c in dm.coefficients],

@@ -66,11 +66,16 @@ class ControlSystem:
     #: ρ of a free horizon (cost C + ρ·T over a horizon T to be optimised), an expression
     #: in the parameters; None for a fixed horizon.
     time_cost: sp.Expr | None = None
+    #: The final end: None (fixed: both nodes of the last element given), () (free) or
+    #: named equalities ψ(q, y) = 0 in the first-order symbols and parameters, on the
+    #: last element (:func:`end_conditions`).
+    end: tuple[tuple[str, sp.Expr], ...] | None = None
 
     def fingerprint(self) -> str:
         return ":".join([self.equations, sp.srepr(self.lagrangian), sp.srepr(self.cost),
                          sp.srepr(self.controls), repr(self.actuated), sp.srepr(self.bounds),
-                         sp.srepr(self.path_inequalities), sp.srepr(self.time_cost)])
+                         sp.srepr(self.path_inequalities), sp.srepr(self.time_cost),
+                         sp.srepr(self.end)])
 
     def unactuated(self, n: int) -> tuple[int, ...]:
         """The fibre directions no control acts on, in the order of the constraints
@@ -150,6 +155,38 @@ def _time_cost(value, defaults: Mapping[sp.Symbol, float]) -> sp.Expr | None:
     return rho
 
 
+def end_conditions(end: Any, groupoid: Groupoid, defaults: Mapping[sp.Symbol, float],
+                   controls: Sequence[sp.Symbol]) -> tuple[tuple[str, sp.Expr], ...] | None:
+    """:attr:`ControlSystem.end` from ``optimal_control(end=...)``: ``"fixed"`` (None),
+    ``"free"`` (()), or ψ — one expression, a list, or a mapping name → expression — in
+    the first-order symbols of ``groupoid`` (q, q̇ or ξ) and the parameters, at most as
+    many as the state has coordinates."""
+    if isinstance(end, str) and end in ("fixed", "free"):
+        return None if end == "fixed" else ()
+    if isinstance(end, str) or end is None:
+        raise ModelError(f"end must be 'fixed', 'free' or the end conditions ψ(q, y) = 0 "
+                         f"(an expression, a list or a mapping name → expression), got {end!r}")
+    named = list(end.items()) if isinstance(end, Mapping) else \
+        [(f"psi{i}", v) for i, v in enumerate([end] if isinstance(end, sp.Expr) else end)]
+    coordinates = groupoid.continuous_symbols(1)
+    state = groupoid.source_dim + groupoid.fibre_dim
+    if not named or len(named) > state:
+        raise ModelError(f"{len(named)} end conditions ψ = 0 for a state of {state} "
+                         f"coordinates {[str(c) for c in coordinates]}: give between 1 and "
+                         f"{state}, or end='free'")
+    out = []
+    for name, value in named:
+        psi = scalar(value, f"end condition {name!r}")
+        unknown = psi.free_symbols - set(coordinates) - set(defaults)
+        if unknown:
+            hint = " (controls are not part of the state)" if unknown & set(controls) else ""
+            raise ModelError(f"end condition {name!r} uses {sorted(map(str, unknown))}{hint}; "
+                             f"it is ψ(q, y) = 0 in {[str(c) for c in coordinates]} and the "
+                             f"parameters")
+        out.append((str(name), psi))
+    return tuple(out)
+
+
 def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
                     controls: Sequence[Any] | str, actuated: Sequence[int] | None = None,
                     parameters: Mapping[Any, float] | None = None,
@@ -158,7 +195,7 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
                     symmetries: Sequence[Symmetry] = (),
                     bounds: Mapping[Any, tuple[Any, Any]] | None = None,
                     inequalities: Sequence[Any] | Mapping[str, Any] = (),
-                    time_cost: Any = None) -> Model:
+                    time_cost: Any = None, end: Any = "fixed") -> Model:
     """The optimal-control problem min ∫ C(q, y, u) dt of a mechanical system on the
     algebroid of ``groupoid``, as a constrained second-order :class:`Model`.
 
@@ -202,6 +239,15 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
         ``solve_bvp`` being the first guess (:mod:`symvi._runtime.horizon`). Keep a
         control cost in C: with C = 0 (pure minimum time) the optimality system is
         singular; a small ε|u|² gives nearly bang–bang controls.
+    end:
+        The final end of the path: ``"fixed"`` (both nodes of the last element given to
+        ``solve_bvp``), ``"free"`` (the last nodes are unknowns: the natural boundary
+        conditions hold), or end conditions ψ(q, y) = 0 — one expression, a list, or a
+        mapping name → expression in the first-order symbols and the parameters — on
+        the last element, by the groupoid's first first-order rule (the midpoint on the
+        pair groupoid, ξ on a Lie group), with multipliers ν (``res.end_multipliers``).
+        On a Lie group the configuration enters no equation: ψ constrains ξ (and an
+        action groupoid's base point). The start stays fixed.
     """
     if equations not in EQUATIONS:
         raise ModelError(f"equations must be one of {EQUATIONS}, got {equations!r}")
@@ -226,6 +272,12 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
         raise ModelError(f"the cost of {name!r} does not depend on the controls {list(map(str, u))}")
     defaults = dict(_sympify_parameters(parameters))
     rho = _time_cost(time_cost, defaults)
+    final = end_conditions(end, groupoid, defaults, u)
+    if final is not None and symmetries and equations == "variational":
+        raise ModelError("declared symmetries fix the multipliers' freedom of exactly "
+                         "dependent constraints between fixed ends; with end conditions "
+                         "other than 'fixed' their identity has a free boundary term — "
+                         "leave end='fixed' or the symmetries out")
     EL = euler_lagrange_operator(algebroid, L)
     forces = [EL[a] for a in directions]
     return Model(
@@ -235,4 +287,5 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
         constraints=[EL[A] for A in range(len(EL)) if A not in directions],
         controls=forces, symmetries=symmetries,
         control_system=ControlSystem(L, C, u, directions, equations, *declared(
-            bounds, inequalities, u, groupoid.continuous_symbols(1), defaults), rho))
+            bounds, inequalities, u, groupoid.continuous_symbols(1), defaults), rho,
+            final))

@@ -83,6 +83,9 @@ class DerivedModel:
     #: :attr:`DiscreteModel.constraint_names`.
     constraint_names: tuple[str, ...] = ()
     unactuated: tuple[int, ...] = ()
+    #: :attr:`DiscreteModel.end_free` and :attr:`DiscreteModel.end_names`.
+    end_free: bool = False
+    end_names: tuple[str, ...] = ()
     #: The inequalities c ≤ 0 per window (their count is the ``inequality`` kernel's rows).
     inequality_names: tuple[str, ...] = ()
     #: The control-free inequalities on one element (the ``boundary`` kernel's rows).
@@ -144,14 +147,15 @@ def _name_entries(E: sp.Matrix, prefix: str, out: list) -> sp.Matrix:
     return sp.Matrix(E.shape[0], E.shape[1], entry)
 
 
-def _stencil(dm: DiscreteModel, elements: int, windows: int = 0) -> _Stencil:
+def _stencil(dm: DiscreteModel, elements: int, windows: int = 0,
+             extra: tuple[sp.Symbol, ...] = ()) -> _Stencil:
     g = dm.groupoid
     x0 = tuple(sp.Dummy(f"x_{i}", real=True) for i in range(g.source_dim))
     fs = tuple(tuple(sp.Dummy(f"f{k}_{i}", real=True) for i in range(g.fibre_dim))
                for k in range(elements))
     lams = tuple(tuple(sp.Dummy(f"lam{w}_{a}", real=True)
                        for a in range(len(dm.window_multipliers))) for w in range(windows))
-    z = x0 + tuple(s for f in fs for s in f) + tuple(s for lam in lams for s in lam)
+    z = x0 + tuple(s for f in fs for s in f) + tuple(s for lam in lams for s in lam) + extra
     xs, definitions, jacobian_definitions = [x0], [], []
     D = [_selector(x0, z)]
     for k in range(elements - 1):
@@ -209,6 +213,18 @@ class _Engine:
                     grad = self.gradients[slot].xreplace(mapping)
                     total += side(st.xs[element], st.fs[element], self.dm.step).T * grad
         return total
+
+    def element_variation(self, st: _Stencil, node: int, element: int,
+                          F: sp.Expr) -> sp.Matrix:
+        """d/dε of F on one element (an expression in the first slot's coordinates)
+        when node ν_node is varied: zero unless the element meets the node."""
+        g, (X, Fs) = self.dm.groupoid, self.dm.slots[0]
+        side = g.right if node == element + 1 else g.left if node == element else None
+        if side is None:
+            return sp.zeros(g.fibre_dim, 1)
+        mapping = dict(zip(X, st.xs[element])) | dict(zip(Fs, st.fs[element]))
+        grad = sp.Matrix([sp.diff(F, s) for s in tuple(X) + tuple(Fs)]).xreplace(mapping)
+        return side(st.xs[element], st.fs[element], self.dm.step).T * grad
 
     def lagrangian(self, st: _Stencil, w: int) -> sp.Expr:
         return self.dm.lagrangian.xreplace(self._window_mapping(st, w))
@@ -279,6 +295,8 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
             (("value", sp.Matrix([c.xreplace(on_one) for c in dm.boundary_inequalities])),),
             "the inequalities without controls on one element (first-order rule): the "
             "check of the fixed boundary elements"))
+    if dm.end_free:
+        kernels += _end_kernels(dm, engine, sources)
     if lifted:
         kernels += _lifted_kernels(dm, engine, window, one)
     if dm.gauges:
@@ -322,9 +340,11 @@ def fibre_sources(dm: DiscreteModel) -> tuple[int, ...]:
     constraints, whose fibres are
     each a group increment or the target of a base coordinate (pair, matrix-group and
     action factors: an action's base point Γ_{k+1} = Γ_k·τ(hξ_k) is the source of no
-    fibre, so the change of coordinates to increments stays linear); () otherwise.
+    fibre, so the change of coordinates to increments stays linear); () otherwise,
+    and with end conditions other than fixed (their unknown end nodes have no lifted rows
+    yet: the node system solves them at every N).
     """
-    return () if dm.inequalities else increment_sources(dm)
+    return () if dm.inequalities or dm.end_free else increment_sources(dm)
 
 
 def increment_sources(dm: DiscreteModel) -> tuple[int, ...]:
@@ -345,6 +365,41 @@ def increment_sources(dm: DiscreteModel) -> tuple[int, ...]:
         if t in fibre:
             sources[fibre[t]] = j
     return () if None in sources else tuple(sources)
+
+
+def _end_kernels(dm: DiscreteModel, engine: "_Engine", sources) -> list[Kernel]:
+    """The residuals of the last r nodes when they are unknowns (end conditions other
+    than fixed), and the end conditions ψ = 0 on the last element.
+
+    Node N − j (j = 0 … r − 1) meets only the windows N − j − r … N − r: its residual is
+    the variation of those windows' augmented L_d, plus ν·ψ(last element) — the
+    stencil of r + j elements from element N − j − r, the multipliers of its j + 1
+    windows, then ν, the end conditions' multipliers (``stencil_end{j}``). Without ψ
+    (a free end) these are the natural boundary conditions: the discrete momenta at the
+    end vanish."""
+    r, windowed = dm.order, bool(dm.window_constraints)
+    nu = tuple(sp.Dummy(f"nu_{a}", real=True) for a in range(len(dm.end_conditions)))
+    weighted = sum((v * psi for v, psi in zip(nu, dm.end_conditions)), sp.S.Zero)
+    kernels = []
+    for j in range(r):
+        st = _stencil(dm, r + j, windows=j + 1 if windowed else 0, extra=nu)
+        R = engine.variation(st, r, range(j + 1)) \
+            + engine.element_variation(st, r, r + j - 1, weighted)
+        kernels.append(_in_increments(Kernel(
+            f"stencil_end{j}", st.z, (("residual", R), ("jacobian", st.total_jacobian(R))),
+            f"residual of node N - {j} (an unknown end node) and its Jacobian: windows "
+            f"N - {j} - r ... N - r, then nu . psi on the last element",
+            st.definitions + st.jacobian_definitions, along=False), st, sources))
+    if dm.end_conditions:
+        one = _stencil(dm, 1)
+        (X, F), = dm.slots[:1]
+        on_one = dict(zip(X, one.xs[0])) | dict(zip(F, one.fs[0]))
+        values = sp.Matrix([psi.xreplace(on_one) for psi in dm.end_conditions])
+        kernels.append(Kernel(
+            "end_condition", one.z, (("value", values), ("jacobian", one.total_jacobian(values))),
+            "end conditions psi = 0 on the last element and their Jacobian",
+            one.definitions + one.jacobian_definitions, along=False))
+    return kernels
 
 
 def _in_increments(kernel: Kernel, st: _Stencil, sources: Sequence[int]) -> Kernel:
@@ -606,6 +661,7 @@ def _derive(dm: DiscreteModel) -> DerivedModel:
                         node_pairs=g.elements_are_node_pairs,
                         constraint_count=len(dm.constraints), control_count=len(dm.controls),
                         constraint_names=dm.constraint_names, unactuated=dm.unactuated,
+                        end_free=dm.end_free, end_names=dm.end_names,
                         inequality_names=dm.inequality_names,
                         boundary_names=dm.boundary_names,
                         step_scaled=tuple(g.step_scaled()),

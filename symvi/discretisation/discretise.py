@@ -12,6 +12,7 @@ from typing import TYPE_CHECKING
 
 import sympy as sp
 
+from ..errors import ModelError
 from ..groupoids.base import Groupoid
 from .rules import Rule
 from ..declaration.symbols import h
@@ -66,6 +67,12 @@ class DiscreteModel:
     #: on the fixed elements of the boundary data.
     boundary_inequalities: tuple[sp.Expr, ...] = ()
     boundary_names: tuple[str, ...] = ()
+    #: Whether the last nodes are unknowns (end conditions other than fixed), and the
+    #: end conditions ψ = 0 on the last element (the first slot's coordinates, by the
+    #: groupoid's first first-order rule) with their names.
+    end_free: bool = False
+    end_conditions: tuple[sp.Expr, ...] = ()
+    end_names: tuple[str, ...] = ()
 
     @property
     def window_multipliers(self) -> tuple[sp.Symbol, ...]:
@@ -125,7 +132,8 @@ def discretise(model: "Model") -> DiscreteModel:
                                                       for a in range(len(named))),
                          time_cost=None if system is None else system.time_cost,
                          boundary_inequalities=tuple(c for _, c in boundary),
-                         boundary_names=tuple(n for n, _ in boundary))
+                         boundary_names=tuple(n for n, _ in boundary),
+                         **_end(model, system, xs[0], fs[0]))
 
 
 def _constraint_names(model: "Model", count: int) -> tuple[str, ...]:
@@ -141,11 +149,35 @@ def _on_one_element(model: "Model", system, x, f) -> tuple[tuple[str, sp.Expr], 
     """The control-free inequalities on the element (x, f) by the groupoid's first
     first-order rule (the midpoint on the pair groupoid, ξ on a Lie group), those that
     it expresses in (x, f) and the parameters alone (not, say, one in q̈)."""
+    average, known = _one_element(model, x, f)
+    return tuple((name, c) for name, c in system.state_inequalities(average)
+                 if c.free_symbols <= known)
+
+
+def _one_element(model: "Model", x, f):
+    """(F ↦ F on the element (x, f) by the groupoid's first first-order rule, the symbols
+    such an expression may use)."""
     g = model.groupoid
     first = g.rules(1)[0]
     known = set(x) | set(f) | set(model.parameter_symbols) | {h}
-    return tuple((name, c) for name, c in system.state_inequalities(
-        lambda F: first.average(g, F, [x], [f], h)) if c.free_symbols <= known)
+    return (lambda F: first.average(g, F, [x], [f], h)), known
+
+
+def _end(model: "Model", system, x, f) -> dict:
+    """The :class:`DiscreteModel` fields of the final end (``end_free``,
+    ``end_conditions``, ``end_names``): ψ on the last element (x, f)."""
+    if system is None or system.end is None:
+        return {}
+    average, known = _one_element(model, x, f)
+    conditions = []
+    for name, psi in system.end:
+        on_element = average(psi)
+        if not on_element.free_symbols <= known:
+            raise ModelError(f"end condition {name!r} cannot be written on one element by "
+                             f"the groupoid's first-order rule")
+        conditions.append(on_element)
+    return dict(end_free=True, end_conditions=tuple(conditions),
+                end_names=tuple(name for name, _ in system.end))
 
 
 def node_variation(groupoid: Groupoid, lagrangian: sp.Expr, rule: Rule, xs, fs) -> sp.Matrix:
