@@ -61,12 +61,13 @@ class Inequalities:
 
     def linearised(self, delta: np.ndarray, blocks: np.ndarray, width: int) -> np.ndarray:
         """GΔη per window (windows × I), Δη the node part of a correction in the block
-        layout (``blocks``: the node of each block of ``width`` unknowns)."""
+        layout (``blocks``: the node of each block of ``width`` unknowns; the end
+        conditions' multipliers ν follow them)."""
         n, r = self.model.n, self.model.order
         eta = np.zeros((self.n_nodes, n))
-        eta[blocks] = delta.reshape(-1, width)[:, :n]
-        first, last = r, self.n_nodes - 1 - r        # fixed nodes do not move
-        eta[:first], eta[last + 1:] = 0.0, 0.0
+        eta[blocks] = delta[:len(blocks) * width].reshape(-1, width)[:, :n]
+        last = self.n_nodes - 1 - (0 if self.model.end_free else r)
+        eta[:r], eta[last + 1:] = 0.0, 0.0          # fixed nodes do not move
         windows = sliding_window_view(eta, r + 1, axis=0)      # (W, n, r + 1)
         stacked = windows.transpose(0, 2, 1).reshape(self.windows, -1)
         return np.einsum("wkj,wj->wk", self.jacobian, stacked)
@@ -79,10 +80,12 @@ class Inequalities:
         nodes = np.zeros((self.n_nodes, n))
         for j in range(r + 1):
             nodes[j:j + self.windows] += weighted[:, j * n:(j + 1) * n]
-        nodes[:r], nodes[self.n_nodes - r:] = 0.0, 0.0      # fixed nodes do not move
+        nodes[:r] = 0.0                                   # fixed nodes do not move
+        if not self.model.end_free:
+            nodes[self.n_nodes - r:] = 0.0
         out = np.zeros((len(blocks), width))
         out[:, :n] = nodes[blocks]
-        return out.reshape(-1)
+        return np.concatenate([out.reshape(-1), np.zeros(self.model.end_count)])
 
 
 #: A control-free inequality of a fixed boundary element may exceed 0 by this much,
@@ -101,7 +104,8 @@ def check_boundary_data(model, path: Path, p, h: float) -> None:
     if not names:
         return
     r, N = model.order, path.f.shape[0]
-    for end, elements in (("start", range(0, r - 1)), ("end", range(N - r + 1, N))):
+    final = range(N, N) if model.end_free else range(N - r + 1, N)   # an unknown end: a guess
+    for end, elements in (("start", range(0, r - 1)), ("end", final)):
         for e in elements:
             c = model.along_vector("boundary", path.x[e:e + 2], path.f[e:e + 1], h, p)[0]
             k = int(np.argmax(c))

@@ -37,7 +37,8 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
               guess: str | np.ndarray | tuple | BVPResult | None = None,
               maxiter: int = 100, xtol: float = 1e-9, ftol: float = 0.0,
               raise_on_failure: bool = False) -> BVPResult:
-    """Solve for the free nodes (and multipliers) with the first and last r nodes fixed.
+    """Solve for the free nodes (and multipliers) with the first and last r nodes fixed
+    (or, with end conditions, only the first).
 
     Parameters
     ----------
@@ -45,7 +46,10 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
         (r, n) arrays of nodes q. Matrix Lie group: (r, d, d) configurations. Groupoids
         with both (action groupoids, products): ``(x, g)``, base points (r, m) and
         configurations (r, d, d) — a tuple of such arrays with several group factors.
-        On an action groupoid the base points must follow the configurations.
+        On an action groupoid the base points must follow the configurations. With end
+        conditions (``optimal_control(..., end="free" or ψ)``) the last r nodes are
+        unknowns and ``end`` their first guess, or None: a previous result's ``guess``
+        last nodes, else the start's last node held; ``res.end_multipliers`` holds ν.
     n_steps : N, the number of elements: N + 1 nodes t_k = k·h, k = 0 … N, on [0, T].
     h, T : the step h, or the horizon T = N·h (keyword; give one of them). With a free
         horizon (``optimal_control(..., time_cost=ρ)``) the first guess of it, the

@@ -92,7 +92,7 @@ class ConstraintDiagnosis:
 
     @property
     def _controlled(self) -> bool:
-        return not any(n.startswith("constraint ") for n in self.involved)
+        return not any(n.startswith(("constraint ", "end condition ")) for n in self.involved)
 
     @property
     def _produced(self) -> str:
@@ -111,17 +111,19 @@ def diagnose(problem, path: Path) -> ConstraintDiagnosis | None:
     dependency, no unattainable correction), the model has no constraints or declared
     gauges, or A is too large to decompose densely."""
     model = problem.model
-    rows = problem.constraint_rows(path) if model.constraints else None
+    rows = problem.constraint_rows(path) if model.constraints or model.end_count else None
     if rows is None or model.info.get("gauges") or (~rows).sum() > DENSE_LIMIT:
         return None
     res, ab, bw, finite = problem.assemble(path, True)
     if not finite:
         return None
     A = _sparse(ab, bw)[rows][:, ~rows].toarray()
-    U, s, _ = np.linalg.svd(A, full_matrices=False)
+    # rows without node entries pin the multipliers of a free end's missing window
+    kept = np.abs(A).sum(axis=1) > 0
+    U, s, _ = np.linalg.svd(A[kept], full_matrices=False)
     if not s.size or s[0] == 0.0:
         return None
-    values = U.T @ res[rows]
+    values = U.T @ res[rows][kept]
     # the nodes' scale, not the multipliers' (which a failing solve drives up)
     size = 1.0 + max(float(np.abs(path.x).max(initial=0.0)),
                      float(np.abs(path.g).max(initial=0.0)))
@@ -134,19 +136,23 @@ def diagnose(problem, path: Path) -> ConstraintDiagnosis | None:
     if not weakest.any():
         return None
     inconsistency = float(np.abs(values[dependent & ~consistent]).max(initial=0.0))
-    involved = _involved(model, U[:, weakest])
+    weight = np.zeros(kept.size)
+    weight[kept] = (U[:, weakest] ** 2).sum(axis=1)
+    names, involved = _involved(model, weight)
     return ConstraintDiagnosis(int(dependent.sum()), inconsistency, float(reach.max()),
-                               tuple(model.info["constraint_names"][a] for a in involved)
-                               if "constraint_names" in model.info else
-                               tuple(f"constraint {a + 1}" for a in involved),
-                               _motion(problem, path, involved))
+                               names, _motion(problem, path, involved))
 
 
-def _involved(model, vectors: np.ndarray) -> list[int]:
-    """The constraint components that carry at least 5 % of the combinations' weight."""
-    s = model.constraints
-    weight = (vectors ** 2).reshape(-1, s, vectors.shape[1]).sum(axis=(0, 2))
-    return [a for a in range(s) if weight[a] >= 0.05 * weight.sum()]
+def _involved(model, weight: np.ndarray) -> tuple[tuple[str, ...], list[int]]:
+    """(names, indices) of the constraint components — then the end conditions — that
+    carry at least 5 % of the combinations' ``weight`` (per constraint row)."""
+    s, ends = model.constraints, model.end_count
+    per_window = weight[:weight.size - ends].reshape(-1, s).sum(axis=0) if s else np.zeros(0)
+    totals = np.concatenate([per_window, weight[weight.size - ends:]])
+    names = list(model.info.get("constraint_names") or [f"constraint {a + 1}" for a in range(s)])
+    names += [f"end condition {name!r}" for name in model.info.get("end_conditions", [])]
+    chosen = [a for a in range(totals.size) if totals[a] >= 0.05 * totals.sum()]
+    return tuple(names[a] for a in chosen), [a for a in chosen if a < s]
 
 
 def _motion(problem, path: Path, involved: list[int]) -> tuple:

@@ -36,6 +36,10 @@ def slope(model, result: BVPResult, p) -> float:
         else np.zeros((len(values), 0))
     weights = np.hstack([np.ones((len(values), 1)), lam, z])
     derivative = float((values[:, :weights.shape[1]] * weights).sum())
+    if result.end_multipliers is not None:     # ν·∂ψ/∂h of the end conditions
+        last = np.concatenate([x[-2], result.f[-1]])
+        derivative += float(model.kernel_outputs("end_horizon", last, p, h)[0]
+                            @ result.end_multipliers)
     return derivative / N + float(values[0, -1])
 
 

@@ -161,7 +161,9 @@ def _block_jacobian(ip, active: np.ndarray):
     n, r = model.n, model.order
     position = np.full(ineq.n_nodes, -1)
     position[ip.blocks] = np.arange(len(ip.blocks)) * ip.width
-    position[:r], position[ineq.n_nodes - r:] = -1, -1     # fixed nodes do not move
+    position[:r] = -1                                       # fixed nodes do not move
+    if not model.end_free:
+        position[ineq.n_nodes - r:] = -1
     windows, which = np.nonzero(active)
     row_of = np.arange(len(windows))
     rows, cols, vals = [], [], []
@@ -171,7 +173,7 @@ def _block_jacobian(ip, active: np.ndarray):
         rows.append(np.repeat(row_of[free], n))
         cols.append((at[free][:, None] + np.arange(n)).ravel())
         vals.append(ineq.jacobian[windows[free], which[free], j * n:(j + 1) * n].ravel())
-    size = len(ip.blocks) * ip.width
+    size = len(ip.blocks) * ip.width + model.end_count
     return csr_matrix((np.concatenate(vals), (np.concatenate(rows), np.concatenate(cols))),
                       shape=(len(windows), size))
 

@@ -399,6 +399,12 @@ def _end_kernels(dm: DiscreteModel, engine: "_Engine", sources) -> list[Kernel]:
             "end_condition", one.z, (("value", values), ("jacobian", one.total_jacobian(values))),
             "end conditions psi = 0 on the last element and their Jacobian",
             one.definitions + one.jacobian_definitions, along=False))
+        if dm.time_cost is not None:    # ν·∂ψ/∂h enters dJ*/dT (a ξ = τ⁻¹(w)/h moves with h)
+            kernels.append(Kernel(
+                "end_horizon", one.z,
+                (("value", values.applyfunc(lambda e: _at_fixed_elements(dm, e, one.fs))),),
+                "d psi/dh at a fixed last element (a free horizon's dJ/dT)", one.definitions,
+                along=False))
     return kernels
 
 
