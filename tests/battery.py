@@ -44,7 +44,7 @@ def guesses(module, name: str, N: int, count: int = 20, amplitude: float = 0.5) 
         eta = sum(np.outer(np.sin((k + 1) * np.pi * t), a[k]) for k in range(3))
         eta[(blocks < model.order) | (blocks > N - model.order)] = 0.0
         delta = np.concatenate([eta, np.zeros((len(blocks), model.constraints))], axis=1)
-        moved = problem.moved(base, delta.reshape(-1), 1.0)
+        moved = problem.moved(base, np.r_[delta.reshape(-1), np.zeros(model.end_count)], 1.0)
         if moved is not None:
             out[f"perturbed {seed}"] = free_nodes(module, moved, N)
     return out

@@ -482,8 +482,11 @@ def test_jacobians_match_central_differences(name, compiled, derived):
     bounded = {"inequality"} if dm.inequality_names else set()
     # first order: ∂F⁻L_d/∂z, the discrete Legendre transform's Jacobian (a State start)
     legendre = {"momentum_minus"} if dm.order == 1 and not dm.constraint_count else set()
-    assert {k.name for k in kernels} == \
-        constrained | bounded | legendre | ({"stencil"} if dm.whole_trajectory else set())
+    # an unknown end: the partial stencils of its last nodes and the end conditions ψ
+    ends = {f"stencil_end{j}" for j in range(dm.order)} | (
+        {"end_condition"} if dm.end_names else set()) if dm.end_free else set()
+    assert {k.name for k in kernels} == constrained | bounded | legendre | ends | (
+        {"stencil"} if dm.whole_trajectory else set())
     p = list(dm.defaults)
     for kernel in kernels:
         rng = np.random.default_rng(zlib.crc32(f"{name}:{kernel.name}".encode()))

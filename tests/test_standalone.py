@@ -90,10 +90,11 @@ CHILD = textwrap.dedent("""
 
 
 def _as_list(value):
-    """Nested arrays (tuples of arrays for (x, g) data) as JSON lists."""
+    """Nested arrays (tuples of arrays for (x, g) data) as JSON lists; None (an unknown
+    end) as null."""
     if isinstance(value, tuple):
         return [_as_list(v) for v in value]
-    return np.asarray(value, dtype=float).tolist()
+    return None if value is None else np.asarray(value, dtype=float).tolist()
 
 
 def run_standalone(directory: Path, name: str, example) -> dict:

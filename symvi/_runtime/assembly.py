@@ -146,6 +146,9 @@ class Problem:
 
     def moved(self, path: Path, delta, alpha):
         m, trial = self.model, path.copy()
+        if np.size(delta) != m.lib.symvi_bvp_unknowns(path.x.shape[0]):    # C reads it all
+            raise ValueError(f"a correction of {np.size(delta)} numbers for "
+                             f"{m.lib.symvi_bvp_unknowns(path.x.shape[0])} unknowns")
         failed = m.ffi.new("long *")
         code = m.lib.symvi_bvp_update(m.ptr(trial.x), m.ptr(trial.g), m.ptr(trial.f),
                                       m.ptr(trial.lam), m.ptr(trial.nu), m.ptr(delta), alpha,

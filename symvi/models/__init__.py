@@ -18,14 +18,15 @@ _GROUP_MODELS = ("rigid_body", "heavy_top", "spherical_pendulum", "planar_body",
 BUNDLED = ("harmonic_oscillator", "pendulum", "double_pendulum", "cubic_spline",
            "spline_potential", "so3_cubic", "double_pendulum_oc", "cart_pole_oc",
            "heavy_top_rotors_oc_variational", "spacecraft_slew", "minimum_time_slew",
-           "cart_pole_swing_up", "planar_flyer") \
+           "cart_pole_swing_up", "planar_flyer", "cart_pole_catch") \
     + tuple(f"{name}{suffix}" for name in _GROUP_MODELS for suffix in ("", "_exp"))
 #: Optimal-control problems (constrained second-order models solved as whole trajectories).
 CONTROL = ("rigid_body_oc", "rigid_body_oc_exp", "heavy_top_rotors_oc",
            "heavy_top_rotors_oc_exp", "heavy_top_rotors_oc_variational",
            "double_pendulum_oc", "cart_pole_oc")
 #: Optimal-control problems with bounds (inequalities; the interior-point solve).
-BOUNDED = ("spacecraft_slew", "minimum_time_slew", "cart_pole_swing_up", "planar_flyer")
+BOUNDED = ("spacecraft_slew", "minimum_time_slew", "cart_pole_swing_up", "planar_flyer",
+           "cart_pole_catch")
 
 
 def get(name: str) -> Model:
