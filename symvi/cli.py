@@ -101,12 +101,20 @@ def _solve(module, ex, steps: int, h: float, params: dict, args):
     start = time.perf_counter()
     result = module.solve_bvp(ex.start, ex.end, steps, h, params)
     elapsed = time.perf_counter() - start
-    print(f"solve_bvp  N = {steps}, h = {h:g}, T = {steps * h:g}: {elapsed * 1e3:.1f} ms, "
-          f"{result.iterations} Newton iterations")
+    free = module.model.info.get("free_horizon")
+    # a free horizon's T and h are the solve's, not the guess passed in
+    T, step = (result.T, float(result.t[1])) if free else (steps * h, h)
+    print(f"solve_bvp  N = {steps}, h = {step:g}, T = {T:g}{' (free)' if free else ''}: "
+          f"{elapsed * 1e3:.1f} ms, {result.iterations} Newton iterations")
     print(f"status     {result.status.name}: {result.message}")
     print(f"cost       {result.cost:.12g}")
-    if module.model.info.get("free_horizon"):
-        print(f"horizon    T = {result.t[-1]:.10g} (free; h = {result.t[1]:.6g})")
+    if free:
+        print(f"horizon    T = {result.t[-1]:.10g} (free, from the guess {steps * h:g}; "
+              f"h = {result.t[1]:.6g})")
+    if result.end_multipliers is not None:
+        ends = module.model.info.get("end_conditions", [])
+        print(f"end        ν = {np.array2string(result.end_multipliers, precision=6)} "
+              f"for {', '.join(ends)}")
     if result.controls is not None:
         peak = np.abs(result.controls).max(axis=0)
         print(f"controls   max |u| per control = {np.array2string(peak, precision=6)}")

@@ -126,3 +126,19 @@ def test_solve_bvp_takes_the_step_or_the_horizon(compiled):
         module.solve_bvp(ex.start, ex.end, 200)
     with pytest.raises(ValueError, match="the horizon T must be a positive"):
         module.solve_bvp(ex.start, ex.end, 200, T=-1.0)
+
+
+def test_a_free_horizon_and_end_conditions_are_reported_as_solved(build_dir, tmp_path, capsys):
+    """The solve_bvp line states the optimal T and h of a free horizon, not the guess; a
+    run with end conditions prints ν and its archive holds them."""
+    code = main(["run", "minimum_time_slew", "--build-dir", str(build_dir), "--steps", "60"])
+    out = capsys.readouterr().out
+    T = float(out.split("horizon    T = ")[1].split()[0])
+    guess = float(out.split("from the guess ")[1].split(";")[0])
+    assert code == 0 and f"T = {T:g} (free):" in out and abs(T - guess) > 1e-3, out
+    npz = tmp_path / "catch.npz"
+    code = main(["run", "cart_pole_catch", "--build-dir", str(build_dir), "--steps", "60",
+                 "--output", str(npz)])
+    out = capsys.readouterr().out
+    assert code == 0 and "for upright, pole at rest, cart at rest" in out, out
+    assert np.load(npz)["end_multipliers"].shape == (3,)
