@@ -44,3 +44,17 @@ def test_a_minimum_moved_below_zero_is_not_accepted(minimum, reduced):
     assert abs(check - target) <= 1e-6 * lowest
     verdict = battery.runtime(module, "optimality").second_order(moved, bw, rows)
     assert verdict.minimum == (target > 0), (target, verdict)
+
+
+@pytest.mark.parametrize("reduced", [-2.5e-4, -1e-6, 0.1])
+def test_the_lifted_inertia_tells_the_same(minimum, reduced):
+    """The verdict of the lifted system (from N = 2000 on): its inertia count of J − σI on
+    the node corrections, assembled here at N = 150."""
+    module, _, _, _, _, W, Z, lowest = minimum
+    target = reduced * lowest if reduced > 0 else reduced
+    model, ex = module.model, get(NAME).example
+    r = module.solve_bvp(ex.start, ex.end, N, ex.h * ex.n_steps / N, guess="chord")
+    problem, path, _, _ = battery.assembled(module, NAME, N, r, lifted=True)
+    lifted = problem.lifted_system
+    assert lifted is not None
+    assert lifted.minimum(-(lowest - target))[0] == (target > 0)
