@@ -206,3 +206,27 @@ def test_the_newton_matrix_of_the_unknown_end_is_the_residuals_derivative(models
         if not column.any() and np.array_equal(J[:, i], np.eye(size)[i]):
             continue    # a pinned unknown (a fixed node's, a missing window's λ): η = 0
         assert np.abs(column - J[:, i]).max() <= 1e-6 * (1 + np.abs(J[:, i]).max()), i
+
+
+def test_end_conditions_that_cannot_determine_the_end_are_named(build_dir):
+    """Redundant end conditions make their rows dependent; a ψ without gradient at the
+    first guess (|Ω|² − 1 at rest) leaves the linearised conditions unsolvable. Neither is
+    a SUCCESS; each is named, with the remedy — and with a guess of the end that gives
+    ψ a gradient the second is solved."""
+    from test_independent_optimum import cay, hat
+
+    Omega = sp.Matrix(SO3().xi)
+    twice = compile_model(slew("spin_twice", "cayley", "", steps=20,
+                               end={"a": Omega[0] - 1, "b": 2 * Omega[0] - 2}), build_dir)
+    r = twice.solve_bvp([np.eye(3)] * 2, None, 20, 0.05)
+    assert not r.success and "end conditions 'a', 'b' are dependent" in r.message, r.message
+    speed = compile_model(slew("spin_speed", "cayley", "", steps=20, end={
+        "speed": Omega[0] ** 2 + Omega[1] ** 2 - 1, "w3": Omega[2]}), build_dir)
+    r = speed.solve_bvp([np.eye(3)] * 2, None, 20, 0.05)
+    # only 'speed' lacks a gradient: 'w3' is not named
+    assert not r.success and "end conditions 'speed' cannot be met to first order" \
+        in r.message, r.message
+    guess = [np.eye(3), cay(hat(0.05 * np.array([0.8, 0.0, 0.0])))]
+    r = speed.solve_bvp([np.eye(3)] * 2, guess, 20, 0.05)
+    assert r.success, r.message
+    assert abs(r.f[-1, 0] ** 2 + r.f[-1, 1] ** 2 - 1) <= 1e-10 and abs(r.f[-1, 2]) <= 1e-10

@@ -52,7 +52,7 @@ def test_the_lifted_inertia_tells_the_same(minimum, reduced):
     the node corrections, assembled here at N = 150."""
     module, _, _, _, _, W, Z, lowest = minimum
     target = reduced * lowest if reduced > 0 else reduced
-    model, ex = module.model, get(NAME).example
+    ex = get(NAME).example
     r = module.solve_bvp(ex.start, ex.end, N, ex.h * ex.n_steps / N, guess="chord")
     problem, path, _, _ = battery.assembled(module, NAME, N, r, lifted=True)
     lifted = problem.lifted_system

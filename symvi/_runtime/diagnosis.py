@@ -65,6 +65,8 @@ class ConstraintDiagnosis:
 
     def describe(self, N: int, h: float) -> str:
         """The finding and its remedy, for a failed result's message."""
+        if self.involved and all(n.startswith("end condition ") for n in self.involved):
+            return self._end_conditions()
         names = ", ".join(self.involved)
         plural = "s" if len(self.involved) > 1 else ""
         where = f"unactuated direction{plural}" if self._controlled else f"constraint{plural}"
@@ -89,6 +91,20 @@ class ConstraintDiagnosis:
                 f"equations=\"variational\") — and the solver fixes the multipliers' "
                 f"freedom; otherwise leave the directions no control reaches out of the "
                 f"model")
+
+    def _end_conditions(self) -> str:
+        """The finding when only end conditions ψ are involved."""
+        names = ", ".join(n.removeprefix("end condition ") for n in self.involved)
+        if self.unattainable:
+            why = (f"a combination of them has no gradient here but the value "
+                   f"{self.inconsistency:.3g}" if np.isinf(self.reach) else
+                   f"a correction {self.reach:.3g} times the path's size would be needed")
+            return (f"; the end conditions {names} cannot be met to first order from this "
+                    f"path ({why}): give solve_bvp a guess of the last nodes (`end=`) where "
+                    f"ψ has a gradient, or check that ψ = 0 has a solution")
+        return (f"; the end conditions {names} are dependent ({self.dependent} combination"
+                f"{'s' if self.dependent > 1 else ''} without gradient): remove the "
+                f"redundant ones")
 
     @property
     def _controlled(self) -> bool:
@@ -117,18 +133,21 @@ def diagnose(problem, path: Path) -> ConstraintDiagnosis | None:
     res, ab, bw, finite = problem.assemble(path, True)
     if not finite:
         return None
-    A = _sparse(ab, bw)[rows][:, ~rows].toarray()
-    # rows without node entries pin the multipliers of a free end's missing window
-    kept = np.abs(A).sum(axis=1) > 0
+    J = _sparse(ab, bw)
+    A = J[rows][:, ~rows].toarray()
+    # rows without node entries and a 1 on the diagonal pin the multipliers of a free
+    # end's missing window; an end condition without gradient stays (a finding)
+    kept = (np.abs(A).sum(axis=1) > 0) | (J.diagonal()[rows] != 1.0)
     U, s, _ = np.linalg.svd(A[kept], full_matrices=False)
-    if not s.size or s[0] == 0.0:
+    if not s.size:
         return None
     values = U.T @ res[rows][kept]
     # the nodes' scale, not the multipliers' (which a failing solve drives up)
     size = 1.0 + max(float(np.abs(path.x).max(initial=0.0)),
                      float(np.abs(path.g).max(initial=0.0)))
-    dependent = s <= DEPENDENT * s[0]
-    consistent = np.abs(values) <= NOISE * s[0] * size
+    scale = s[0] if s[0] > 0 else 1.0       # A = 0: every combination is without gradient
+    dependent = s <= DEPENDENT * scale
+    consistent = np.abs(values) <= NOISE * scale * size
     with np.errstate(divide="ignore"):
         reach = np.where(dependent, np.where(consistent, 0.0, np.inf),
                          np.abs(values) / np.where(dependent, 1.0, s)) / size
