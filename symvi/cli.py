@@ -162,7 +162,8 @@ def _parameters(given: list[str] | None, model) -> dict[str, float]:
 def _check_plot_support() -> None:
     """Refuse ``--plot`` before building and running when matplotlib is missing."""
     if importlib.util.find_spec("matplotlib") is None:
-        raise ValueError("--plot needs matplotlib: pip install 'symvi[plots]'")
+        from .plots import MISSING
+        raise ValueError(MISSING)
 
 
 def _check(args) -> int:

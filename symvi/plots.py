@@ -14,6 +14,9 @@ from typing import Any, Sequence
 
 import numpy as np
 
+#: Why ``--plot`` cannot run: the one message of the CLI's early check and of a late import.
+MISSING = "--plot needs matplotlib: pip install 'symvi[plots]'"
+
 
 def plot_result(result: Any, model: Any, info: dict, file: str | os.PathLike) -> None:
     """Write the plot of ``result`` (a ``StepResult`` or ``BVPResult``) of the declared
@@ -25,7 +28,7 @@ def plot_result(result: Any, model: Any, info: dict, file: str | os.PathLike) ->
         matplotlib.use("Agg")
         import matplotlib.pyplot as plt
     except ImportError:
-        raise ValueError("--plot needs matplotlib: pip install 'symvi[plots]'") from None
+        raise ValueError(MISSING) from None
     names = [str(s) for s in model.groupoid.continuous_symbols(1)]
     n = info["fibre_dim"]
     fig, axes = plt.subplots(3, 1, figsize=(8, 8), sharex=True, constrained_layout=True)

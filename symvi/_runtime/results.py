@@ -234,7 +234,8 @@ class BVPResult(_Result):
         factors: the next node).
     multipliers : (N−r+1, s) multipliers λ^k of the windows (constrained models), else None.
     controls : (N−r+1, c) controls u_k at each window's quadrature point (optimal-control
-        problems: u = EL(L)_a of the discrete path), else None.
+        problems: u = EL(L)_a of the discrete path), else None; at the times
+        ``t_controls`` (a property: the windows' middle nodes).
     bound_multipliers : (N−r+1, I) multipliers z ≥ 0 of the inequalities c ≤ 0 of every
         window (bounded optimal control, named by ``inequalities``), else None.
     active : (N−r+1, I) where an inequality is active (its multiplier exceeds its slack
@@ -282,6 +283,15 @@ class BVPResult(_Result):
     def T(self) -> float:
         """The horizon N·h: with a free final time (``time_cost``), the optimal one."""
         return float(self.t[-1]) if len(self.t) else 0.0
+
+    @property
+    def t_controls(self) -> np.ndarray | None:
+        """The times of :attr:`controls`: window w's middle node t_{w+1}, where both
+        second-order rules (three-point, Lie midpoint) and the variational controlled
+        equations centre it; None without controls."""
+        if self.controls is None:
+            return None
+        return self.t[1:1 + len(self.controls)]
 
     @property
     def active_set(self) -> list[tuple[str, ...]] | None:
