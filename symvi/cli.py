@@ -75,8 +75,12 @@ def _run(args) -> int:
 def _integrate(module, ex, steps: int, h: float, params: dict, args):
     """The step-by-step example: integrate and summarise."""
     start = time.perf_counter()
-    result = module.integrate(ex.initial, steps, h, params, keep_every=args.keep_every)
+    result = module.integrate(ex.run_from, steps, h, params, keep_every=args.keep_every)
     elapsed = time.perf_counter() - start
+    if ex.state is not None:
+        print(f"start      the state v = {np.array2string(np.asarray(ex.state.v, float))}"
+              f"{'' if ex.state.x is None else f', x = {np.array2string(np.asarray(ex.state.x, float))}'}"
+              f" (the first element by the discrete Legendre transform at this h)")
     print(f"integrate  {steps} steps, h = {h:g}, t = {result.t[0]:g} … {result.t[-1]:g}: "
           f"{elapsed * 1e3:.1f} ms ({steps / max(elapsed, 1e-9):,.0f} steps/s)")
     print(f"status     {result.status.name}: {result.message}")

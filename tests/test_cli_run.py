@@ -67,8 +67,8 @@ def test_run_with_a_parameter_writes_the_result_and_a_plot(pendulum, build_dir, 
     out = capsys.readouterr().out
     assert code == 0 and "params     l = 2" in out
     ex = get("pendulum").example
-    direct = pendulum.integrate(ex.initial, 2000, ex.h, params={"l": 2.0})
-    default = pendulum.integrate(ex.initial, 2000, ex.h)
+    direct = pendulum.integrate(ex.run_from, 2000, ex.h, params={"l": 2.0})
+    default = pendulum.integrate(ex.run_from, 2000, ex.h)
     saved = np.load(npz)
     assert str(saved["status"]) == "SUCCESS" and str(saved["message"]) == direct.message
     for field in ("t", "x", "f", "newton_iterations", "momenta", "energy"):

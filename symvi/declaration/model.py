@@ -28,9 +28,14 @@ class Example:
     """A default run of a model, used by ``symvi run`` and the documentation.
 
     ``initial`` holds what the step map needs to start: for the pair groupoid the first
-    ``2·order`` nodes q_0, …, q_{2r−1}, as an array of shape (2r, n). A whole-trajectory
-    example (optimal control) gives the fixed nodes ``start`` and ``end`` of
-    ``solve_bvp`` instead, with ``n_steps`` = N.
+    ``2·order`` nodes q_0, …, q_{2r−1}, as an array of shape (2r, n). A first-order model
+    may give ``state`` instead or as well, a :class:`symvi.State` (q₀, v₀): ``symvi run``
+    then starts from it through the discrete Legendre transform, so that ``--h`` changes
+    the step and not the motion (fixed nodes fix the velocity (q₁ − q₀)/h, which changes
+    with h); ``initial`` is then the node form of about the same start at the step ``h``.
+    A whole-trajectory example (optimal control) gives the fixed nodes ``start`` and
+    ``end`` of ``solve_bvp`` instead (``end`` None with end conditions), with ``n_steps`` =
+    N.
     """
 
     initial: Any = None
@@ -38,6 +43,12 @@ class Example:
     n_steps: int = 100
     start: Any = None
     end: Any = None
+    state: Any = None
+
+    @property
+    def run_from(self) -> Any:
+        """What ``symvi run`` integrates from: ``state`` when given, else ``initial``."""
+        return self.state if self.state is not None else self.initial
 
     @property
     def whole_trajectory(self) -> bool:

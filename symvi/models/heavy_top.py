@@ -8,7 +8,7 @@ the momentum about the vertical Γ·Π (discrete Noether, exact), bounded energy
 """
 import sympy as sp
 
-from symvi import SO3, ActionGroupoid, Example, Model, Symmetry
+from symvi import ActionGroupoid, Example, Model, SO3, State, Symmetry
 
 
 def build(retraction: str = "cayley") -> Model:
@@ -26,7 +26,8 @@ def build(retraction: str = "cayley") -> Model:
         symmetries=[Symmetry("vertical_momentum", G.q)],
         parameters={I1: 1.0, I2: 2.0, I3: 3.0, mgl: 1.0,
                     chi[0]: 0.6, chi[1]: 0.0, chi[2]: 0.8},
-        example=Example(initial=([0.0, 0.6, 0.8], [[0.5, 0.3, 2.0]]), h=0.01, n_steps=10_000),
+        example=Example(initial=([0.0, 0.6, 0.8], [[0.5, 0.3, 2.0]]), h=0.01, n_steps=10_000,
+                        state=State(v=[0.5, 0.3, 2.0], x=[0.0, 0.6, 0.8])),
         description=f"Heavy top on the action groupoid S2 x SO(3), inertia diag(I1, I2, I3), "
                     f"centre of mass along chi, {retraction} retraction.")
 

@@ -8,7 +8,7 @@ moving on a straight line at constant speed — and the discrete flow's Noether 
 """
 import sympy as sp
 
-from symvi import SE2, Example, Model
+from symvi import Example, Model, SE2, State
 
 
 def build(retraction: str = "cayley") -> Model:
@@ -21,7 +21,7 @@ def build(retraction: str = "cayley") -> Model:
         lagrangian=I * omega**2 / 2 + m * (v1**2 + (v2 + omega * c)**2) / 2,
         parameters={m: 1.0, I: 0.5, c: 0.3},
         example=Example(initial=(sp.eye(3).tolist(), [[1.0, 0.5, -0.2]]), h=0.01,
-                        n_steps=10_000),
+                        n_steps=10_000, state=State(v=[1.0, 0.5, -0.2])),
         description=f"Planar rigid body on SE(2), centre of mass offset c from the frame, "
                     f"{retraction} retraction.")
 

@@ -6,7 +6,7 @@ retraction (``rigid_body``) and the exponential (``rigid_body_exp``).
 """
 import sympy as sp
 
-from symvi import SO3, Example, Model
+from symvi import Example, Model, SO3, State
 
 
 def build(retraction: str = "cayley") -> Model:
@@ -19,7 +19,7 @@ def build(retraction: str = "cayley") -> Model:
         lagrangian=(I1 * Omega[0]**2 + I2 * Omega[1]**2 + I3 * Omega[2]**2) / 2,
         parameters={I1: 1.0, I2: 2.0, I3: 3.0},
         example=Example(initial=(sp.eye(3).tolist(), [[0.3, 1.0, 0.2]]), h=0.01,
-                        n_steps=100_000),
+                        n_steps=100_000, state=State(v=[0.3, 1.0, 0.2])),
         description=f"Free rigid body on SO(3), inertia diag(I1, I2, I3), {retraction} "
                     f"retraction.")
 

@@ -8,7 +8,7 @@ about the vertical and the horizontal linear momentum (discrete Noether, exact).
 """
 import sympy as sp
 
-from symvi import SE3, ActionGroupoid, Example, Model
+from symvi import ActionGroupoid, Example, Model, SE3, State
 
 
 def _action(q, W):
@@ -31,7 +31,8 @@ def build(retraction: str = "cayley") -> Model:
         + m * V.dot(V) / 2 - m * g * z - k * z**2 / 2,
         parameters={J1: 1.0, J2: 2.0, J3: 3.0, m: 1.0, g: 9.81, k: 4.0},
         example=Example(initial=([0.0, 0.0, 0.6, 0.8], [[0.5, 0.3, 1.0, 0.2, 0.0, 0.4]]),
-                        h=0.01, n_steps=10_000),
+                        h=0.01, n_steps=10_000,
+                        state=State(v=[0.5, 0.3, 1.0, 0.2, 0.0, 0.4], x=[0.0, 0.0, 0.6, 0.8])),
         description=f"Rigid body on SE(3) in gravity on a vertical spring, {retraction} "
                     f"retraction.")
 

@@ -9,7 +9,7 @@ the angular momentum about the vertical Γ·Π, bounded energy error.
 """
 import sympy as sp
 
-from symvi import SO3, ActionGroupoid, Example, Model, Symmetry
+from symvi import ActionGroupoid, Example, Model, SO3, State, Symmetry
 
 
 def build(retraction: str = "cayley") -> Model:
@@ -25,7 +25,7 @@ def build(retraction: str = "cayley") -> Model:
         symmetries=[Symmetry("vertical_momentum", G.q)],
         parameters={m: 1.0, l: 1.0, g: 9.81, J: 1.0},
         example=Example(initial=([0.0, 0.6, -0.8], [[1.0, 0.5, 0.0]]), h=0.01,
-                        n_steps=10_000),
+                        n_steps=10_000, state=State(v=[1.0, 0.5, 0.0], x=[0.0, 0.6, -0.8])),
         description=f"Spherical pendulum on S2 x SO(3) (bob at -l R e3), {retraction} "
                     f"retraction.")
 
