@@ -42,3 +42,10 @@ def test_run_starts_from_the_state_whatever_the_step(build_dir, tmp_path, capsys
         assert "start      the state v = [0.], x = [1.]" in out, out
         step = float(np.load(npz)["t"][1])
         assert abs(np.load(npz)["energy"][0] - 0.5) <= step**2, (h, np.load(npz)["energy"][0])
+
+
+def test_a_run_from_a_state_counts_every_step(compiled):
+    module, ex = compiled("pendulum"), get("pendulum").example
+    r = module.integrate(ex.state, 100, ex.h)
+    assert r.t.size == 101 and r.message == \
+        "integrated 100 steps (the first by the discrete Legendre transform)"

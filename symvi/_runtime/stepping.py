@@ -88,7 +88,9 @@ def integrate(model, initial, n_steps: int, h: float, params: Mapping[str, float
     code, steps, rnorm, iterations = run.loop(z0, g0, maxiter, xtol, ftol)
     status = Status(code)
     if status == Status.SUCCESS:
-        message = f"integrated {n_steps} steps"
+        # from a state the first step is the transform's element
+        message = f"integrated {n_steps + from_state} steps" + (
+            " (the first by the discrete Legendre transform)" if from_state else "")
     else:
         reason = _FAILURE[status].format(maxiter=maxiter, iterations=iterations)
         message = (f"step {steps} (to t = {(K + steps) * h:.6g}) failed: {reason}; "
