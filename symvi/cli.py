@@ -113,8 +113,7 @@ def _solve(module, ex, steps: int, h: float, params: dict, args):
     print(f"status     {result.status.name}: {result.message}")
     print(f"cost       {result.cost:.12g}")
     if free:
-        print(f"horizon    T = {result.t[-1]:.10g} (free, from the guess {steps * h:g}; "
-              f"h = {result.t[1]:.6g})")
+        print(f"horizon    T = {T:.10g} (free, from the guess {steps * h:g}; h = {step:.6g})")
     if result.end_multipliers is not None:
         ends = module.model.info.get("end_conditions", [])
         print(f"end        ν = {np.array2string(result.end_multipliers, precision=6)} "

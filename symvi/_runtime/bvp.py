@@ -242,7 +242,7 @@ def _conditioning(problem: Problem, path: Path, status: Status) -> str:
     rounding may dominate the solves and no globalisation helps."""
     if status not in (Status.MAX_ITERATIONS, Status.STALLED):
         return ""
-    _, ab, bw, finite = problem.assemble(path, True)
+    _, ab, bw, finite = problem.assembled(path)
     rcond = problem.reciprocal_condition(ab, bw) if finite else np.inf
     if rcond >= np.finfo(float).eps:
         return ""

@@ -130,7 +130,7 @@ def diagnose(problem, path: Path) -> ConstraintDiagnosis | None:
     rows = problem.constraint_rows(path) if model.constraints or model.end_count else None
     if rows is None or model.info.get("gauges") or (~rows).sum() > DENSE_LIMIT:
         return None
-    res, ab, bw, finite = problem.assemble(path, True)
+    res, ab, bw, finite = problem.assembled(path)
     if not finite:
         return None
     J = _sparse(ab, bw)
@@ -159,7 +159,7 @@ def diagnose(problem, path: Path) -> ConstraintDiagnosis | None:
     weight[kept] = (U[:, weakest] ** 2).sum(axis=1)
     names, involved = _involved(model, weight)
     return ConstraintDiagnosis(int(dependent.sum()), inconsistency, float(reach.max()),
-                               names, _motion(problem, path, involved))
+                               names, _motion(problem, path, involved, size))
 
 
 def _involved(model, weight: np.ndarray) -> tuple[tuple[str, ...], list[int]]:
@@ -174,11 +174,12 @@ def _involved(model, weight: np.ndarray) -> tuple[tuple[str, ...], list[int]]:
     return tuple(names[a] for a in chosen), [a for a in chosen if a < s]
 
 
-def _motion(problem, path: Path, involved: list[int]) -> tuple:
-    """Per involved unactuated direction of a group factor: the mean velocity of the element from the
-    first node to the last over T, and the boundary elements' velocities, where one is
-    not zero. Only for optimal control, whose constraints are the unactuated directions
-    in order (:attr:`ControlSystem.unactuated`)."""
+def _motion(problem, path: Path, involved: list[int], size: float) -> tuple:
+    """Per involved unactuated direction of a group factor: the mean velocity of the
+    element from the first node to the last over T, and the boundary elements'
+    velocities, where one is not zero next to the nodes' scale ``size``. Only for optimal
+    control, whose constraints are the unactuated directions in order
+    (:attr:`ControlSystem.unactuated`)."""
     model = problem.model
     directions = model.info.get("unactuated")
     if not directions:
@@ -195,6 +196,6 @@ def _motion(problem, path: Path, involved: list[int]) -> tuple:
         if not model.step_scaled[A]:    # a pair factor's fibre is a node, not a velocity
             continue
         values = (float(chord[0, A]), float(path.f[0, A]), float(path.f[-1, A]))
-        if max(map(abs, values)) > 1e-12 * (1.0 + problem.size(path)):
+        if max(map(abs, values)) > 1e-12 * size:
             out.append((model.info["constraint_names"][a], *values))
     return tuple(out)

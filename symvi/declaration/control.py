@@ -280,12 +280,11 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
                          "leave end='fixed' or the symmetries out")
     EL = euler_lagrange_operator(algebroid, L)
     forces = [EL[a] for a in directions]
+    system = ControlSystem(L, C, u, directions, equations, *declared(
+        bounds, inequalities, u, groupoid.continuous_symbols(1), defaults), rho, final)
     return Model(
         name=name, groupoid=groupoid, lagrangian=C.xreplace(dict(zip(u, forces))),
         discretisation=discretisation or groupoid.default_discretisation(2),
         parameters=parameters, example=example, description=description,
-        constraints=[EL[A] for A in range(len(EL)) if A not in directions],
-        controls=forces, symmetries=symmetries,
-        control_system=ControlSystem(L, C, u, directions, equations, *declared(
-            bounds, inequalities, u, groupoid.continuous_symbols(1), defaults), rho,
-            final))
+        constraints=[EL[A] for A in system.unactuated(len(EL))],
+        controls=forces, symmetries=symmetries, control_system=system)

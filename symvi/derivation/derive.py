@@ -132,6 +132,13 @@ class _Stencil:
                                     if x and x[0] in named])
 
 
+def _on_element(dm: DiscreteModel, st: _Stencil, element: int) -> dict:
+    """The first slot's coordinates (x, f) ↦ those of ``element`` of the stencil: an
+    expression on one element (a boundary inequality, an end condition) placed there."""
+    (x, f), = dm.slots[:1]
+    return dict(zip(x, st.xs[element])) | dict(zip(f, st.fs[element]))
+
+
 def _selector(symbols, z) -> sp.Matrix:
     return sp.Matrix(len(symbols), len(z), lambda i, j: int(z[j] == symbols[i]))
 
@@ -222,9 +229,9 @@ class _Engine:
         side = g.right if node == element + 1 else g.left if node == element else None
         if side is None:
             return sp.zeros(g.fibre_dim, 1)
-        mapping = dict(zip(X, st.xs[element])) | dict(zip(Fs, st.fs[element]))
-        grad = sp.Matrix([sp.diff(F, s) for s in tuple(X) + tuple(Fs)]).xreplace(mapping)
-        return side(st.xs[element], st.fs[element], self.dm.step).T * grad
+        grad = sp.Matrix([sp.diff(F, s) for s in tuple(X) + tuple(Fs)])
+        return side(st.xs[element], st.fs[element], self.dm.step).T \
+            * grad.xreplace(_on_element(self.dm, st, element))
 
     def lagrangian(self, st: _Stencil, w: int) -> sp.Expr:
         return self.dm.lagrangian.xreplace(self._window_mapping(st, w))
@@ -288,8 +295,7 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
                 f"{what} on one window and their Jacobian",
                 window.definitions + window.jacobian_definitions))
     if dm.boundary_inequalities:
-        (x, f), = dm.slots[:1]
-        on_one = dict(zip(x, one.xs[0])) | dict(zip(f, one.fs[0]))
+        on_one = _on_element(dm, one, 0)
         kernels.append(Kernel(
             "boundary", one.z,
             (("value", sp.Matrix([c.xreplace(on_one) for c in dm.boundary_inequalities])),),
@@ -392,9 +398,7 @@ def _end_kernels(dm: DiscreteModel, engine: "_Engine", sources) -> list[Kernel]:
             st.definitions + st.jacobian_definitions, along=False), st, sources))
     if dm.end_conditions:
         one = _stencil(dm, 1)
-        (X, F), = dm.slots[:1]
-        on_one = dict(zip(X, one.xs[0])) | dict(zip(F, one.fs[0]))
-        values = sp.Matrix([psi.xreplace(on_one) for psi in dm.end_conditions])
+        values = sp.Matrix([psi.xreplace(_on_element(dm, one, 0)) for psi in dm.end_conditions])
         kernels.append(Kernel(
             "end_condition", one.z, (("value", values), ("jacobian", one.total_jacobian(values))),
             "end conditions psi = 0 on the last element and their Jacobian",
