@@ -150,18 +150,20 @@ def test_every_success_from_perturbed_guesses_is_a_feasible_minimum(cart_pole):
 
 
 def test_converges_at_a_thousand_steps_from_the_default_and_ten_perturbed_guesses(cart_pole):
-    """Issue 21's robustness item at N = 1000: the default guess and 9 of the first ten
-    seeded perturbations succeed, each feasible and complementary in independent code, at
+    """Issue 21's robustness item at N = 1000: the default guess and the first ten seeded
+    perturbations all succeed, each feasible and complementary in independent code, at
     one of two families of minima — the swing-up against the limits (32.2852–32.2859:
     the track touched at different windows, each a verified minimum of the discrete
     problem) or round the other way without a limit active (20.4063). Before the slack
     reset, the active-set Newton and the unbounded solve's last iterate as a start, 10 of
     these 11 failed; until μ fell on the node correction alone (the multipliers of track
     windows touched side by side stay ill-determined in the barrier problem), perturbed 4
-    ran out of iterations with μ stuck at 8e-4. Perturbed 4 then came back SUCCESS at a
-    point the second-order test had accepted only at a penalty of 10⁶ times W's scale,
-    where rounding hides negative curvature; with the test capped at 10², it says STALLED
-    (not resolved: issue 21's item asks all 11)."""
+    ran out of iterations with μ stuck at 8e-4, and later its line search stalled at
+    iteration 25. Since the second-order test's margin over rounding
+    (``optimality._rounding_shifted``) the route differs: the interior point from the
+    unbounded solve's last iterate fails, one penalty stage and the active-set Newton
+    follow, and it ends at the default guess's minimum (nodes to 1e-13, cost to 1e-13
+    relative)."""
     import battery
 
     model, module = cart_pole
@@ -172,7 +174,7 @@ def test_converges_at_a_thousand_steps_from_the_default_and_ten_perturbed_guesse
     costs, failures = solve_each(module, prob, guesses)
     print(f"\nN = {N}: {len(costs)} of 11, costs {sorted(set(round(v, 8) for v in costs.values()))}; "
           f"failures {failures}")
-    assert "cubic" in costs and len(costs) >= 10
+    assert not failures, failures
     for label, cost in costs.items():
         assert abs(cost - 20.4063) < 1e-4 or 32.2850 < cost < 32.2860, (label, cost)
 
