@@ -66,7 +66,7 @@ def test_step_map_reproduces_exactly_representable_cubic(compiled):
     c = rng.integers(-8, 9, size=(4, 2)).astype(float)
     c[3] = np.where(c[3] == 0, 3.0, c[3])  # a genuine cubic in both coordinates
     h, steps = 2.0**-6, 1000
-    exact = cubic(c, h * np.arange(steps + 4))
+    exact = cubic(c, h * np.arange(steps + 1))
     result = mod.integrate(exact[:4], steps, h)
     assert result.success, result.message
     assert result.q.shape == exact.shape
@@ -83,18 +83,18 @@ def test_step_map_reproduces_real_cubic_within_roundoff_envelope(compiled, h):
     rng = np.random.default_rng(7)
     c = rng.uniform(-1.0, 1.0, size=(4, 2))
     steps = 1000
-    exact = cubic(c, h * np.arange(steps + 4))
+    exact = cubic(c, h * np.arange(steps + 1))
     result = mod.integrate(exact[:4], steps, h)
     assert result.success, result.message
     scale = np.abs(exact).max()
     err_k = np.abs(result.q - exact).max(axis=1) / scale
     k = np.arange(err_k.size)
     envelope = 10.0 * EPS * np.maximum(k, 1) ** 3 / 6.0
-    print(f"\ncubic step map, h = {h}: relative error {err_k[:104].max():.3e} after 100 steps, "
+    print(f"\ncubic step map, h = {h}: relative error {err_k[:101].max():.3e} after 100 steps, "
           f"{err_k.max():.3e} after {steps} (envelope ε·k³/6 at k = 1000: "
           f"{EPS * 1000**3 / 6:.1e}); worst err/(ε k³/6) = "
           f"{(err_k / (EPS * np.maximum(k, 1) ** 3 / 6)).max():.2f}")
-    assert err_k[:104].max() <= 1e-10
+    assert err_k[:101].max() <= 1e-10
     assert np.all(err_k <= envelope + 1e-13)
 
 
@@ -103,7 +103,7 @@ def test_step_map_is_not_exact_for_non_cubic(compiled):
     a discrete solution (its fourth difference is 24 c₄ h⁴ ≠ 0), so the path departs."""
     mod = compiled("cubic_spline")
     h, steps = 2.0**-6, 200
-    t = h * np.arange(steps + 4)
+    t = h * np.arange(steps + 1)
     exact = np.stack([t**4, 1.0 - t**4], axis=1)
     result = mod.integrate(exact[:4], steps, h)
     assert result.success, result.message
@@ -181,7 +181,7 @@ def test_spline_potential_bvp_solution_satisfies_step_map(compiled, N):
         scale = np.abs(jacobian).sum(axis=1).max() * np.abs(z).max()
         worst = max(worst, np.abs(residual).max() / scale)
     # (2) the step map from q_0..q_3.
-    stepped = mod.integrate(q[:4], N - 3, h, params=params)
+    stepped = mod.integrate(q[:4], N, h, params=params)
     assert stepped.success, stepped.message
     gap = relative_error(stepped.q, q)
     print(f"\nspline_potential BVP N = {N}: {result.status.name} ({result.message}); "

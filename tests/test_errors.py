@@ -143,7 +143,7 @@ def test_newton_non_convergence_reports_step_and_residual(compiled):
     result = mod.integrate([[1.0], [1.0]], 100, 0.01, maxiter=1, xtol=1e-14)
     assert not result.success
     assert result.status == mod.Status.MAX_ITERATIONS
-    assert re.search(r"\bstep 0\b", result.message), result.message
+    assert re.search(r"\bstep 2 of 100\b", result.message), result.message
     assert "did not converge in 1 iteration" in result.message
     match = re.search(r"residual norm ([0-9.e+-]+)", result.message)
     assert match and float(match.group(1)) > 0
@@ -151,7 +151,7 @@ def test_newton_non_convergence_reports_step_and_residual(compiled):
     with pytest.raises(mod.NewtonError) as info:
         mod.integrate([[1.0], [1.0]], 100, 0.01, maxiter=1, xtol=1e-14, raise_on_failure=True)
     assert info.value.result.message == result.message
-    assert "step 0" in str(info.value)
+    assert "step 2 of 100" in str(info.value)
 
 
 def fold_model():
@@ -171,7 +171,7 @@ def test_newton_failure_mid_run_truncates_at_failing_step(tmp_path):
     assert expected_failure == 31
     result = mod.integrate([[0.0], [d0]], 100, step)
     assert not result.success
-    assert f"step {expected_failure} " in result.message, result.message
+    assert f"step {expected_failure + 2} of 100 " in result.message, result.message
     assert "residual norm" in result.message
     assert_truncated_and_finite(result, K=2, steps_done=expected_failure)
     # the part that was returned satisfies the recurrence d_{k+1}² = d_k² − h³/3
@@ -192,7 +192,7 @@ def test_singular_step_jacobian_is_reported(tmp_path):
     mod = compile_model(model, tmp_path)
     result = mod.integrate([[1.0], [1.0]], 10, 0.1)
     assert result.status == mod.Status.SINGULAR_JACOBIAN
-    assert "singular" in result.message and "step 0" in result.message
+    assert "singular" in result.message and "step 2 of 10 " in result.message
     assert re.search(r"residual norm 1\.0+e-01", result.message), result.message
     assert_truncated_and_finite(result, K=2, steps_done=0)
     # away from the singular point the same model steps fine (d_{k+1}² = d_k² + h³/3)
@@ -216,7 +216,8 @@ GOOD = dict(initial=[[1.0], [1.0]], n_steps=10, h=0.01)
     (dict(h=-0.01), r"time step h must be positive.*-0\.01"),
     (dict(h=float("nan")), r"time step h must be positive and finite.*nan"),
     (dict(h=float("inf")), r"time step h must be positive and finite.*inf"),
-    (dict(n_steps=-1), r"n_steps must be at least 0, got -1"),
+    (dict(n_steps=0), r"n_steps must be at least 1 \(the initial data's element counts "
+                          r"among the steps\), got 0"),
     (dict(n_steps=2.5), r"n_steps must be an integer"),
     (dict(params={"mass": 2.0}), r"unknown parameter.*'mass'.*\['m', 'l', 'g'\]"),
     (dict(params={"g": float("nan")}), r"parameter g must be finite"),
@@ -231,9 +232,11 @@ def test_bad_arguments_to_integrate(compiled, override, pattern):
         mod.integrate(kwargs.pop("initial"), kwargs.pop("n_steps"), kwargs.pop("h"), **kwargs)
 
 
-def test_zero_steps_is_valid(compiled):
-    result = compiled("pendulum").integrate([[1.0], [1.0]], 0, 0.01)
-    assert result.success and result.q.shape == (2, 1)
+def test_the_given_element_is_the_first_step(compiled):
+    """n_steps counts the given element: one step returns the two nodes given, on [0, h]."""
+    result = compiled("pendulum").integrate([[1.0], [1.0]], 1, 0.01)
+    assert result.success and result.q.shape == (2, 1) and result.t[-1] == 0.01
+    assert result.message == "integrated 1 step (the first given)"
 
 
 @pytest.mark.parametrize("call, pattern", [

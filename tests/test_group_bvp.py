@@ -235,7 +235,7 @@ def test_rigid_body_bvp_agrees_with_step_map(rigid_body, retraction, N):
     np.testing.assert_array_equal(result.g[0], I3)
     np.testing.assert_array_equal(result.g[-1], g_N)
     residual = float(np.abs(stencil_residuals(mod, result.f, h)).max())
-    stepped = mod.integrate((result.g[0], result.f[:1]), N - 1, h)
+    stepped = mod.integrate((result.g[0], result.f[:1]), N, h)
     assert stepped.success, stepped.message
     assert stepped.g.shape == result.g.shape
     g_gap = float(np.abs(stepped.g - result.g).max())

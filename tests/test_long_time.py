@@ -51,7 +51,7 @@ def global_errors(mod, exact, n_values):
     hs, errors = [], []
     for N in n_values:
         h = T / N
-        result = mod.integrate([[exact(0.0)], [exact(h)]], N - 1, h)
+        result = mod.integrate([[exact(0.0)], [exact(h)]], N, h)
         assert result.success, result.message
         assert result.q.shape == (N + 1, 1)
         assert result.t[-1] == pytest.approx(T)
@@ -89,8 +89,8 @@ def test_first_order_start_spoils_nothing_only_with_accurate_q1(compiled):
     mod = compiled("harmonic_oscillator")
     N = 400
     h = T / N
-    good = mod.integrate([[X0], [ho_exact(h)]], N - 1, h).q[-1, 0]
-    crude = mod.integrate([[X0], [X0 + h * V0]], N - 1, h).q[-1, 0]
+    good = mod.integrate([[X0], [ho_exact(h)]], N, h).q[-1, 0]
+    crude = mod.integrate([[X0], [X0 + h * V0]], N, h).q[-1, 0]
     assert abs(crude - ho_exact(T)) > 5 * abs(good - ho_exact(T))
 
 
@@ -169,7 +169,7 @@ def test_harmonic_oscillator_momenta_match_exact_to_second_order(compiled):
     scaled, errors, hs = [], [], []
     for N in NS:
         h = T / N
-        result = mod.integrate([[X0], [ho_exact(h)]], N - 1, h)
+        result = mod.integrate([[X0], [ho_exact(h)]], N, h)
         assert result.success, result.message
         assert result.momenta.shape == (N + 1, 1)
         exact = 1.0 * ho_velocity(result.t)          # p = m ẋ with m = 1
@@ -192,7 +192,7 @@ def test_momenta_scale_with_mass(compiled):
     N = 400
     h = T / N
     initial = [[X0], [ho_exact(h)]]
-    base = mod.integrate(initial, N - 1, h)
-    heavy = mod.integrate(initial, N - 1, h, params={"m": 2.0, "k": 2.0})
+    base = mod.integrate(initial, N, h)
+    heavy = mod.integrate(initial, N, h, params={"m": 2.0, "k": 2.0})
     np.testing.assert_allclose(heavy.q, base.q, rtol=0, atol=1e-13)
     np.testing.assert_allclose(heavy.momenta, 2.0 * base.momenta, rtol=1e-12, atol=1e-14)

@@ -193,7 +193,8 @@ class StepResult(_Result):
     energy : (E,) discrete energy −∂L_d/∂h per element (first-order models), else None.
     noether : (E−2r+2, s) conserved quantities F_Z of the model's declared symmetries at
         nodes r−1, r, … (paper §4.4), one column per symmetry, else None.
-    newton_iterations : (steps,) Newton iterations of each computed step.
+    newton_iterations : (E − K + 1,) Newton iterations of each computed step (the first
+        K − 1 elements, given or from the Legendre transform, took none).
     status, success, message : outcome; on failure the arrays hold the path up to the
         failing step. Success means every step converged and every array is finite.
 
@@ -215,8 +216,7 @@ class StepResult(_Result):
     def __repr__(self) -> str:
         final = {"x": self.x, "f": self.f} | ({"g": self.g} if self.g is not None else {})
         end = f", t = {self.t[-1]:.6g}" if len(self.t) else ""
-        return self._summary(f"{len(self.newton_iterations)} steps, {len(self.t)} nodes{end}",
-                             final)
+        return self._summary(f"{len(self.t)} nodes{end}", final)
 
 
 @dataclass(frozen=True, repr=False)

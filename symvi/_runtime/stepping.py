@@ -51,9 +51,10 @@ def integrate(model, initial, n_steps: int, h: float, params: Mapping[str, float
         group: ``(g_0, xi)`` with g_0 the initial configuration (d, d) and xi the first
         2r−1 increments ξ_k (2r−1, n). Action groupoids and products: ``(x_0, f)`` or
         ``(x_0, g_0, f)`` (see :meth:`CompiledModel.initial_state`).
-    n_steps : from a State, the number of steps: n_steps + 1 nodes on [0, n_steps·h]
-        (the first element, from the transform, is the first step). From elements, the
-        number of new elements to compute after them.
+    n_steps : the number of steps: the result has n_steps elements, n_steps + 1 nodes on
+        [0, n_steps·h], the first K − 1 elements — from the transform, or given — counted
+        among them (at least K − 1: one on a first-order model, three on a second-order
+        one).
     h : time step (> 0).
     params : parameter overrides (mapping name → value); the others keep the defaults
         compiled in (``INFO["defaults"]``).
@@ -73,28 +74,29 @@ def integrate(model, initial, n_steps: int, h: float, params: Mapping[str, float
     within a few iterations instead of iterating to ``maxiter``. Ctrl-C stops a run
     within a fraction of a second (``KeyboardInterrupt``).
     """
-    from_state = isinstance(initial, State)
-    n_steps = arguments.count(n_steps, "n_steps", int(from_state))
+    from_state, K = isinstance(initial, State), model.stencil_elements
+    n_steps = arguments.count(n_steps, "n_steps", K - 1, why=(
+        f" (the initial data's {K - 1} elements count among the steps)" if K > 2
+        else " (the initial data's element counts among the steps)"))
     keep = arguments.count(keep_every, "keep_every", 1)
     h = arguments.step_size(h)
     maxiter = arguments.iterations(maxiter)
     xtol, ftol = arguments.tolerance(xtol, "xtol"), arguments.tolerance(ftol, "ftol")
     p = model.params(params)
     z0, g0 = model.initial_state(initial, h, p)
-    n_steps -= from_state           # the transform's element was the first step
-    K = model.stencil_elements
-    check_memory(model, K - 1 + n_steps, keep, BUFFER_STEPS if keep > 1 else 0)
-    run = _Run(model, n_steps, keep, p, h)
+    new = n_steps - (K - 1)         # the initial elements are the first steps
+    check_memory(model, n_steps, keep, BUFFER_STEPS if keep > 1 else 0)
+    run = _Run(model, new, keep, p, h)
     code, steps, rnorm, iterations = run.loop(z0, g0, maxiter, xtol, ftol)
     status = Status(code)
     if status == Status.SUCCESS:
-        # from a state the first step is the transform's element
-        message = f"integrated {n_steps + from_state} steps" + (
-            " (the first by the discrete Legendre transform)" if from_state else "")
+        message = f"integrated {n_steps} step{'s' * (n_steps != 1)}" + (
+            " (the first by the discrete Legendre transform)" if from_state
+            else f" (the first {K - 1} given)" if K > 2 else " (the first given)")
     else:
         reason = _FAILURE[status].format(maxiter=maxiter, iterations=iterations)
-        message = (f"step {steps} (to t = {(K + steps) * h:.6g}) failed: {reason}; "
-                   f"residual norm {rnorm:.3e}")
+        message = (f"step {K + steps} of {n_steps} (to t = {(K + steps) * h:.6g}) failed: "
+                   f"{reason}; residual norm {rnorm:.3e}")
     result = run.result(steps, status, message)
     return result.raise_for_status() if raise_on_failure else result
 
