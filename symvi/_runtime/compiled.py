@@ -7,6 +7,7 @@ from typing import Callable, Mapping
 import numpy as np
 
 from . import arguments
+from .batch import integrate_many
 from .bvp import solve_bvp
 from .geometry import check_base_points, check_configurations
 from .legendre import first_element
@@ -182,6 +183,13 @@ class CompiledModel:
             raise ValueError(f"model {self.name!r} has constraints with multipliers; it is "
                              f"solved as a whole trajectory: use solve_bvp")
         return integrate(self, initial, n_steps, h, params, **options)
+
+    @_documented_by(integrate_many)
+    def integrate_many(self, initial, n_steps: int, h, params=None, **options):
+        if self.constraints:
+            raise ValueError(f"model {self.name!r} has constraints with multipliers; it is "
+                             f"solved as a whole trajectory: use solve_bvp")
+        return integrate_many(self, initial, n_steps, h, params, **options)
 
     @_documented_by(solve_bvp)
     def solve_bvp(self, start, end, n_steps: int, h: float | None = None, params=None,

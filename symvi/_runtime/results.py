@@ -78,7 +78,7 @@ class NewtonError(RuntimeError):
 
 def _rebuild(kind: str, state: dict):
     """A result of class ``kind`` from its fields (the target of pickling)."""
-    return {"StepResult": StepResult, "BVPResult": BVPResult}[kind](
+    return {"StepResult": StepResult, "BVPResult": BVPResult, "BatchResult": BatchResult}[kind](
         **state | {"status": Status(state["status"])})
 
 
@@ -308,8 +308,105 @@ class BVPResult(_Result):
                              f"{self.iterations} Newton iterations{cost}", final)
 
 
+#: The fields of a StepResult that a batch stacks, and their padding past a failure.
+_STACKED = {"t": np.nan, "x": np.nan, "f": np.nan, "g": np.nan, "momenta": np.nan,
+            "energy": np.nan, "noether": np.nan, "newton_iterations": -1}
+
+
+@dataclass(frozen=True, repr=False)
+class BatchResult(_Result):
+    """A batch of stepped paths (``integrate_many``), stacked on a leading axis b.
+
+    Attributes
+    ----------
+    t, x, f, g, momenta, energy, noether, newton_iterations : the arrays of
+        :class:`StepResult`, each with a leading batch axis (B, …) (g: a tuple of such
+        arrays with several group factors). Past a failed trajectory's last entry they
+        are NaN (``newton_iterations``: −1); ``lengths[name][b]`` is how many entries
+        of trajectory b are its own.
+    statuses : (B,) the :class:`Status` value of each trajectory; ``messages`` their
+        messages; ``succeeded`` a (B,) mask.
+    status, message : SUCCESS when every trajectory succeeded, else the status of the
+        first that failed and a message counting the failures and naming the first few.
+
+    ``result[b]`` is trajectory b as the :class:`StepResult` of the single call (equal
+    to it bit for bit); ``len(result)`` is B.
+    """
+
+    t: np.ndarray
+    x: np.ndarray
+    f: np.ndarray
+    g: np.ndarray | tuple | None
+    newton_iterations: np.ndarray
+    statuses: np.ndarray
+    messages: tuple
+    lengths: dict
+    status: Status
+    message: str
+    momenta: np.ndarray | None = None
+    energy: np.ndarray | None = None
+    noether: np.ndarray | None = None
+
+    @classmethod
+    def stacked(cls, results: list) -> "BatchResult":
+        """One result from the StepResults of a batch's trajectories."""
+        arrays, lengths = {}, {}
+        for name, pad in _STACKED.items():
+            values = [getattr(r, name) for r in results]
+            if values[0] is None:
+                arrays[name] = None
+            elif isinstance(values[0], tuple):
+                parts = [_pad([v[i] for v in values], pad) for i in range(len(values[0]))]
+                arrays[name], lengths[name] = tuple(p for p, _ in parts), parts[0][1]
+            else:
+                arrays[name], lengths[name] = _pad(values, pad)
+        statuses = np.array([int(r.status) for r in results], dtype=np.int8)
+        failed = np.flatnonzero(statuses != Status.SUCCESS)
+        status = Status(statuses[failed[0]]) if failed.size else Status.SUCCESS
+        message = f"{len(results) - failed.size} of {len(results)} trajectories succeeded"
+        if failed.size:
+            message += "; failed: " + "; ".join(
+                f"trajectory {b} ({Status(statuses[b]).name}: {results[b].message})"
+                for b in failed[:3]) + ("; …" if failed.size > 3 else "")
+        return cls(status=status, message=message, statuses=statuses,
+                   messages=tuple(r.message for r in results), lengths=lengths, **arrays)
+
+    @property
+    def succeeded(self) -> np.ndarray:
+        return self.statuses == Status.SUCCESS
+
+    def __len__(self) -> int:
+        return len(self.statuses)
+
+    def __getitem__(self, b: int) -> StepResult:
+        def own(name):
+            value = getattr(self, name)
+            if value is None:
+                return None
+            n = self.lengths[name][b]
+            return tuple(v[b, :n] for v in value) if isinstance(value, tuple) else value[b, :n]
+        return StepResult(status=Status(self.statuses[b]), message=self.messages[b],
+                          **{name: own(name) for name in _STACKED})
+
+    def __repr__(self) -> str:
+        return (f"<BatchResult {self.status.name}: {self.message[:100]!r}; "
+                f"{len(self)} trajectories of up to {self.t.shape[1]} nodes>")
+
+
+def _pad(arrays: list, pad) -> tuple[np.ndarray, np.ndarray]:
+    """The arrays stacked on a new first axis, the shorter ones padded at the end; and
+    the length of each."""
+    lengths = np.array([len(a) for a in arrays])
+    out = np.full((len(arrays), lengths.max(), *arrays[0].shape[1:]), pad,
+                  dtype=arrays[0].dtype)
+    for b, a in enumerate(arrays):
+        out[b, :len(a)] = a
+    return out, lengths
+
+
 #: The names every copy of this file takes from the canonical module.
-SHARED = ("Status", "NewtonError", "State", "StepResult", "BVPResult", "_rebuild")
+SHARED = ("Status", "NewtonError", "State", "StepResult", "BVPResult", "BatchResult",
+          "_rebuild")
 
 
 def _share() -> None:

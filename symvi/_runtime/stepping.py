@@ -7,6 +7,7 @@ a chunked run is bitwise the run of one call.
 """
 from __future__ import annotations
 
+import threading
 import time
 from dataclasses import dataclass
 from typing import Mapping
@@ -74,6 +75,19 @@ def integrate(model, initial, n_steps: int, h: float, params: Mapping[str, float
     within a few iterations instead of iterating to ``maxiter``. Ctrl-C stops a run
     within a fraction of a second (``KeyboardInterrupt``).
     """
+    return run_steps(model, initial, n_steps, h, params, maxiter, xtol, ftol, keep_every,
+                     raise_on_failure)
+
+
+class Stopped(Exception):
+    """A run stopped between two chunks because its ``stop`` event was set."""
+
+
+def run_steps(model, initial, n_steps: int, h: float, params, maxiter: int, xtol: float,
+              ftol: float, keep_every: int, raise_on_failure: bool,
+              stop: threading.Event | None = None) -> StepResult:
+    """:func:`integrate`, stopping (:class:`Stopped`) between two chunks once ``stop`` is
+    set: how a batch (:mod:`.batch`) ends its worker threads promptly."""
     from_state, K = isinstance(initial, State), model.stencil_elements
     n_steps = arguments.count(n_steps, "n_steps", K - 1, why=(
         f" (the initial data's {K - 1} elements count among the steps)" if K > 2
@@ -86,7 +100,7 @@ def integrate(model, initial, n_steps: int, h: float, params: Mapping[str, float
     z0, g0 = model.initial_state(initial, h, p)
     new = n_steps - (K - 1)         # the initial elements are the first steps
     check_memory(model, n_steps, keep, BUFFER_STEPS if keep > 1 else 0)
-    run = _Run(model, new, keep, p, h)
+    run = _Run(model, new, keep, p, h, stop)
     code, steps, rnorm, iterations = run.loop(z0, g0, maxiter, xtol, ftol)
     status = Status(code)
     if status == Status.SUCCESS:
@@ -146,8 +160,10 @@ def _layout(model) -> tuple[list[_Quantity], dict[str, tuple[int, int, tuple]]]:
 class _Run:
     """The stored series of one run and the chunk loop that fills them."""
 
-    def __init__(self, model, n_steps: int, keep: int, p: np.ndarray, h: float):
+    def __init__(self, model, n_steps: int, keep: int, p: np.ndarray, h: float,
+                 stop: threading.Event | None = None):
         self.model, self.n_steps, self.keep, self.p, self.h = model, n_steps, keep, p, h
+        self.stop = stop
         m, n, K = model.m, model.n, model.stencil_elements
         E, G = K - 1 + n_steps, model.info["configuration_dim"]
         self.G = G
@@ -173,6 +189,8 @@ class _Run:
         done, rnorm = model.ffi.new("long *"), model.ffi.new("double *")
         start, chunk = 0, 4096
         while True:
+            if self.stop is not None and self.stop.is_set():
+                raise Stopped
             size = min(chunk, self.n_steps - start, BUFFER_STEPS if self.keep > 1 else chunk)
             at = start if self.keep == 1 else 0
             x, f, g = self.x[at:], self.f[at:], self.g[at:] if self.G else self.g

@@ -1,6 +1,6 @@
 """Where the step map writes: the path and its derived quantities, every k-th node kept.
 
-A stepped path has E elements and E + 1 nodes (E = K − 1 + n_steps). Every stored array
+A stepped path has E = n_steps elements and E + 1 nodes. Every stored array
 is indexed by one running index (a node, an element, a window of the kernel evaluated on
 it), and each index belongs to a node: element e and the energy of element e to node e,
 state j of the momenta to node j, the conserved quantities of window i to node i + r − 1,

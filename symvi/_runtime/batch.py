@@ -1,0 +1,168 @@
+"""Many trajectories at once: :func:`integrate_many` (issue 24).
+
+Each trajectory is the single run :func:`.stepping.integrate` would compute — the same C
+loop on the same data, so the same numbers bit for bit — and the batch is spread over
+threads: the C loop releases the GIL, so two workers keep two cores busy. A trajectory
+whose Newton step fails keeps its own status and message and the others go on. The
+stacked arrays are padded with NaN past a failed trajectory's last node.
+
+Threads stop promptly: every run checks a shared event between two chunks of its C loop
+(about 0.05 s apart), which Ctrl-C, or bad data in one trajectory, sets before the
+exception is raised; no worker is left running.
+"""
+from __future__ import annotations
+
+import os
+import threading
+from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
+from typing import Callable, Mapping
+
+import numpy as np
+
+from . import arguments, stepping
+from .results import BatchResult, State, StepResult
+from .memory import require
+from .storage import bytes_per_node
+
+#: Tasks per worker: small enough tasks that a slow trajectory does not idle the others.
+TASKS_PER_WORKER = 8
+
+
+def integrate_many(model, initial, n_steps: int, h, params: Mapping | None = None, *,
+                   workers: int | None = None, keep_every: int = 1, final_only: bool = False,
+                   maxiter: int = 50, xtol: float = 1e-12, ftol: float = 0.0) -> BatchResult:
+    """Integrate a batch of trajectories of ``n_steps`` steps each, in parallel threads.
+
+    Parameters
+    ----------
+    initial : the initial data of :func:`.stepping.integrate` with a leading batch axis
+        on every array: ``State(x=(B, n), v=(B, n))``, nodes (B, 2r, n) on a pair
+        groupoid, ``(g0 (B, d, d), xi (B, 2r−1, n))`` on a Lie group, and so on. Tuples
+        are the structure (as in the single call); every array in them is batched.
+    n_steps : steps per trajectory (n_steps + 1 nodes on [0, n_steps·h]).
+    h : the step, one for all or one per trajectory (an array of shape (B,)).
+    params : parameter overrides, each value a number or an array of shape (B,) (one
+        value per trajectory, broadcast against the batch).
+    workers : threads (default: the cores this process may use).
+    keep_every, final_only : store only the nodes 0, k, 2k, … (see
+        :func:`.stepping.integrate`), or only the first and the final node, so that many
+        long trajectories fit in memory.
+    maxiter, xtol, ftol : Newton's options of every step (see :func:`.stepping.integrate`).
+
+    Returns a :class:`BatchResult`: every array of :class:`StepResult` with a leading
+    batch axis, each trajectory's status and message (``statuses``, ``messages``), and
+    ``result[b]``, trajectory b as the :class:`StepResult` of the single call. Its status
+    is SUCCESS only when every trajectory succeeded.
+    """
+    item, B = batch_items(initial)
+    steps = _per_trajectory(h, B, "h")
+    overrides = parameter_batch(params, B)
+    n_steps = arguments.count(n_steps, "n_steps", 1)
+    keep = n_steps if final_only else arguments.count(keep_every, "keep_every", 1)
+    workers = arguments.count(workers if workers is not None else _usable_cores(),
+                              "workers", 1)
+    _check_memory(model, B, n_steps, keep)
+    results: list[StepResult | None] = [None] * B
+    stop = threading.Event()
+
+    def work(indices: np.ndarray) -> None:
+        for b in indices:
+            if stop.is_set():
+                return
+            try:
+                results[b] = stepping.run_steps(model, item(b), n_steps, steps[b], overrides(b),
+                                                maxiter, xtol, ftol, keep, False, stop)
+            except stepping.Stopped:
+                return
+            except (ValueError, MemoryError) as exc:
+                stop.set()
+                raise type(exc)(f"trajectory {b}: {exc}") from None
+
+    tasks = np.array_split(np.arange(B), min(B, workers * TASKS_PER_WORKER))
+    with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="symvi") as pool:
+        futures = pending = {pool.submit(work, task) for task in tasks}
+        try:
+            while pending:
+                # a timed wait: a blocking one would notice Ctrl-C only when it ends
+                done, pending = wait(pending, timeout=0.1, return_when=FIRST_EXCEPTION)
+                for future in done:
+                    future.result()
+        except BaseException:
+            stop.set()          # the others end at their next chunk; `with` waits for them
+            for future in futures:
+                future.cancel()
+            raise
+    return BatchResult.stacked(results)
+
+
+def batch_items(initial) -> tuple[Callable[[int], object], int]:
+    """(b ↦ trajectory b's initial data, B) for batched initial data (see
+    :func:`integrate_many`); the arrays must agree on B."""
+    leaves: list[tuple[str, np.ndarray]] = []
+
+    def collect(value, where: str):
+        if isinstance(value, State):
+            return State(**{k: collect(getattr(value, k), f"{where}.{k}")
+                            for k in ("v", "x", "g") if getattr(value, k) is not None})
+        if isinstance(value, tuple):
+            return tuple(collect(part, f"{where}[{i}]") for i, part in enumerate(value))
+        array = arguments.real_array(value, where)
+        if array.ndim == 0:
+            raise ValueError(f"{where}: a batch needs a leading batch axis, got a scalar")
+        leaves.append((where, array))
+        return array
+
+    structure = collect(initial, "initial")
+    sizes = {where: array.shape[0] for where, array in leaves}
+    if len(set(sizes.values())) > 1:
+        raise ValueError("initial: the arrays disagree on the batch size (the leading "
+                         "axis): " + ", ".join(f"{w} has {n}" for w, n in sizes.items()))
+    B = next(iter(sizes.values()))
+    if B == 0:
+        raise ValueError("initial: the batch is empty")
+
+    def item(b: int, value=structure):
+        if isinstance(value, State):
+            return State(**{k: item(b, getattr(value, k)) for k in ("v", "x", "g")
+                            if getattr(value, k) is not None})
+        if isinstance(value, tuple):
+            return tuple(item(b, part) for part in value)
+        return value[b]
+    return item, B
+
+
+def parameter_batch(params: Mapping | None, B: int) -> Callable[[int], dict | None]:
+    """b ↦ trajectory b's parameter overrides; each value a number or B of them."""
+    if params is None:
+        return lambda b: None
+    if not isinstance(params, Mapping):
+        raise ValueError(f"params must be a mapping name → value(s), got {type(params).__name__}")
+    columns = {name: _per_trajectory(value, B, f"params[{name!r}]")
+               for name, value in params.items()}
+    return lambda b: {name: column[b] for name, column in columns.items()}
+
+
+def _per_trajectory(value, B: int, what: str) -> np.ndarray:
+    array = arguments.real_array(value, what)
+    try:
+        return np.broadcast_to(array, (B,))
+    except ValueError:
+        raise ValueError(f"{what}: shape {array.shape} does not broadcast against the batch "
+                         f"of {B} trajectories (give one value, or {B})") from None
+
+
+def _usable_cores() -> int:
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:         # not on Linux
+        return os.cpu_count() or 1
+
+
+def _check_memory(model, B: int, n_steps: int, keep: int) -> None:
+    """Refuse a batch whose paths would not fit, before running it: each path is held
+    twice (its own result, then the stacked arrays)."""
+    nodes = n_steps // keep + 2
+    require(2.0 * B * nodes * bytes_per_node(model),
+            f"a batch of {B:,} paths of {nodes:,} stored nodes",
+            "store every k-th node (keep_every=k) or only the final one (final_only=True)")
+
