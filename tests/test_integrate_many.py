@@ -141,20 +141,46 @@ def test_a_rotation_off_the_group_names_its_trajectory(compiled):
     assert not [t for t in threading.enumerate() if t.name.startswith("symvi")]
 
 
-def test_ctrl_c_stops_every_worker_promptly(compiled):
-    """Ctrl-C 0.2 s into a batch of four 3·10⁶-step runs (about 4 s of work): the batch
-    raises KeyboardInterrupt within half a second and no worker thread is left."""
+@pytest.mark.parametrize("B, n_steps, keep", [(4, 3_000_000, 1000), (20_000, 1000, 1000)],
+                         ids=["long runs one by one", "short runs in C slices"])
+def test_ctrl_c_stops_every_worker_promptly(compiled, B, n_steps, keep):
+    """Ctrl-C 0.2 s into a batch of about 4 s of work — four 3·10⁶-step runs (the chunked
+    single loop), or 2·10⁴ runs of 10³ steps (the batch loop in C, slice by slice): the
+    batch raises KeyboardInterrupt within half a second and no worker thread is left."""
     import _thread
     import time
 
     mod = compiled("double_pendulum")
+    start = states(mod, B)
     timer = threading.Timer(0.2, _thread.interrupt_main)
     began = time.perf_counter()
     timer.start()
     with pytest.raises(KeyboardInterrupt):
-        mod.integrate_many(states(mod, 4), 3_000_000, 0.001, workers=2, keep_every=1000)
+        mod.integrate_many(start, n_steps, 0.001, workers=2, keep_every=keep)
     assert time.perf_counter() - began < 0.7
     assert not [t for t in threading.enumerate() if t.name.startswith("symvi")]
+
+
+def test_a_singular_legendre_transform_names_its_trajectory(build_dir):
+    """The transforms of a slice are solved together; where one is singular (m = 0 for
+    trajectory 2 of a pendulum whose parameters may vanish) the error names it and says
+    what the single call says."""
+    import sympy as sp
+    from symvi import Model, PairGroupoid
+
+    G = PairGroupoid("theta")
+    (theta,), (omega,) = G.q, G.qdot
+    m, l, g = sp.symbols("m l g", real=True)
+    mod = compile_model(Model("pendulum_unsigned", G, lagrangian=m * l**2 * omega**2 / 2
+                              + m * g * l * sp.cos(theta), parameters={m: 1.0, l: 1.0, g: 9.81}),
+                        build_dir)
+    with pytest.raises(ValueError) as batch:
+        mod.integrate_many(mod.State(x=np.zeros((4, 1)), v=np.ones((4, 1))), 10, 0.1,
+                           {"m": np.array([1.0, 2.0, 0.0, 1.0])})
+    with pytest.raises(ValueError) as single:
+        mod.integrate(mod.State(x=[0.0], v=[1.0]), 10, 0.1, {"m": 0.0})
+    assert "singular" in str(single.value)
+    assert str(batch.value) == f"trajectory 2: {single.value}"
 
 
 def _rotation(a: np.ndarray) -> np.ndarray:

@@ -19,7 +19,8 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from . import arguments, stepping
+from . import arguments, batch_loop, stepping
+from .legendre import TransformError, first_fibres
 from .results import BatchResult, State, StepResult
 from .memory import require
 from .storage import bytes_per_node
@@ -57,27 +58,95 @@ def integrate_many(model, initial, n_steps: int, h, params: Mapping | None = Non
     item, B = batch_items(initial)
     steps = _per_trajectory(h, B, "h")
     overrides = parameter_batch(params, B)
-    n_steps = arguments.count(n_steps, "n_steps", 1)
+    n_steps = stepping.step_count(model, n_steps)
     keep = n_steps if final_only else arguments.count(keep_every, "keep_every", 1)
     workers = arguments.count(workers if workers is not None else _usable_cores(),
                               "workers", 1)
+    maxiter = arguments.iterations(maxiter)
+    xtol, ftol = arguments.tolerance(xtol, "xtol"), arguments.tolerance(ftol, "ftol")
     _check_memory(model, B, n_steps, keep)
-    results: list[StepResult | None] = [None] * B
     stop = threading.Event()
+    if bytes_per_node(model) * (n_steps + 1) > batch_loop.MAX_PATH_BYTES:
+        # long runs: one by one through the chunked single loop, bounded memory
+        results: list[StepResult | None] = [None] * B
 
-    def work(indices: np.ndarray) -> None:
-        for b in indices:
+        def work(indices: np.ndarray) -> None:
+            for b in indices:
+                if stop.is_set():
+                    return
+                with _named(b, stop):
+                    results[b] = stepping.run_steps(model, item(b), n_steps, steps[b],
+                                                    overrides(b), maxiter, xtol, ftol, keep,
+                                                    False, stop)
+        _run(work, B, workers, stop)
+        return BatchResult.stacked(results)
+    stacked = batch_loop.Stacked(model, B, n_steps, keep)
+    per_slice = max(1, batch_loop.SLICE_STEPS // n_steps)
+    from_state = isinstance(initial, State)
+
+    def work_in_slices(indices: np.ndarray) -> None:
+        for part in np.array_split(indices, -(-len(indices) // per_slice)):
             if stop.is_set():
                 return
-            try:
-                results[b] = stepping.run_steps(model, item(b), n_steps, steps[b], overrides(b),
-                                                maxiter, xtol, ftol, keep, False, stop)
-            except stepping.Stopped:
-                return
-            except (ValueError, MemoryError) as exc:
-                stop.set()
-                raise type(exc)(f"trajectory {b}: {exc}") from None
+            P, H = [], np.empty(len(part))
+            for j, b in enumerate(part):
+                with _named(b, stop):
+                    P.append(model.params(overrides(b)))
+                    H[j] = arguments.step_size(steps[b])
+            P = np.ascontiguousarray(np.stack(P))
+            starts = _starts(model, item, part, H, P, from_state, stop)
+            batch_loop.run_slice(model, stacked, part, starts, n_steps, P, H, from_state,
+                                 maxiter, xtol, ftol)
+    _run(work_in_slices, B, workers, stop)
+    return stacked.result()
 
+
+def _starts(model, item, part: np.ndarray, H: np.ndarray, P: np.ndarray, from_state: bool,
+            stop: threading.Event) -> list[tuple[np.ndarray, np.ndarray]]:
+    """The stencil prefixes and configurations of the trajectories ``part``; from States,
+    their discrete Legendre transforms solved together (:func:`.legendre.first_fibres`)."""
+    if not from_state:
+        starts = []
+        for j, b in enumerate(part):
+            with _named(b, stop):
+                starts.append(model.initial_state(item(b), H[j], P[j]))
+        return starts
+    parts = []
+    for b in part:
+        with _named(b, stop):
+            parts.append(model.state_parts(item(b)))
+    X, V = np.stack([x for x, _, _ in parts]), np.stack([v for _, v, _ in parts])
+    try:
+        F = first_fibres(model, X, V, H, P)
+    except TransformError as exc:
+        stop.set()
+        raise ValueError(f"trajectory {part[exc.index]}: {exc}") from None
+    return [(np.concatenate([x, f]), g) for (x, _, g), f in zip(parts, F)]
+
+
+class _named:
+    """Re-raise bad data of trajectory b (ValueError, MemoryError) naming it, after
+    stopping the other workers; a stopped run just returns."""
+
+    def __init__(self, b: int, stop: threading.Event):
+        self.b, self.stop = b, stop
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, kind, exc, traceback):
+        if kind is stepping.Stopped:
+            return True
+        if kind is not None and issubclass(kind, (ValueError, MemoryError)):
+            self.stop.set()
+            raise kind(f"trajectory {self.b}: {exc}") from None
+        return False
+
+
+def _run(work: Callable[[np.ndarray], None], B: int, workers: int,
+         stop: threading.Event) -> None:
+    """``work`` on parts of range(B) in ``workers`` threads; the first error (or Ctrl-C)
+    sets ``stop``, and no thread outlives the call."""
     tasks = np.array_split(np.arange(B), min(B, workers * TASKS_PER_WORKER))
     with ThreadPoolExecutor(max_workers=workers, thread_name_prefix="symvi") as pool:
         futures = pending = {pool.submit(work, task) for task in tasks}
@@ -92,7 +161,6 @@ def integrate_many(model, initial, n_steps: int, h, params: Mapping | None = Non
             for future in futures:
                 future.cancel()
             raise
-    return BatchResult.stacked(results)
 
 
 def batch_items(initial) -> tuple[Callable[[int], object], int]:

@@ -10,7 +10,7 @@ from . import arguments
 from .batch import integrate_many
 from .bvp import solve_bvp
 from .geometry import check_base_points, check_configurations
-from .legendre import first_element
+from .legendre import first_fibres, state_arrays
 from .paths import increments
 from .results import State
 from .stepping import integrate
@@ -217,23 +217,29 @@ class CompiledModel:
         see :func:`bvp.increments`."""
         return increments(self, g, h, params)
 
+    def state_parts(self, state: State) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The position x, velocity v and flat configuration g₀ of ``state``, checked."""
+        x, v = state_arrays(self, state)
+        g0 = self._initial_configuration([] if state.g is None else [state.g])
+        if self.matrix_dims:
+            check_configurations(self, g0[None, :], "the state's configuration g")
+        return x, v, g0
+
     def initial_state(self, initial, h: float | None = None,
                       p: np.ndarray | None = None) -> tuple[np.ndarray, np.ndarray]:
         """Split initial data into the stencil prefix (x_0, f_0, …, f_{K−2}) and g_0.
 
         A :class:`State` (first-order models; needs the step ``h`` and the parameter
         vector ``p``): its first element from the discrete Legendre transform
-        (:func:`.legendre.first_element`). Pair groupoid: the first K nodes, shape (K, n).
+        (:mod:`.legendre`). Pair groupoid: the first K nodes, shape (K, n).
         Otherwise ``(x_0, g_0, f)``: the first base point, the configurations of the
         matrix-group factors (one (d, d) matrix, or a sequence of them; optional,
         identity by default) and the first K−1 fibre parts; a Lie group over a point has
         no base point: ``(g_0, f)``.
         """
         if isinstance(initial, State):
-            x0, f0 = first_element(self, initial, h, p)
-            g0 = self._initial_configuration([] if initial.g is None else [initial.g])
-            if self.matrix_dims:
-                check_configurations(self, g0[None, :], "the state's configuration g")
+            x0, v0, g0 = self.state_parts(initial)
+            f0 = first_fibres(self, x0[None], v0[None], np.array([h]), p[None])[0]
             return np.concatenate([x0, f0]), g0
         K = self.stencil_elements
         if self.info["node_pairs"]:

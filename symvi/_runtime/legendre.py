@@ -25,9 +25,16 @@ from .geometry import check_base_points
 MAXITER, XTOL = 30, 1e-14
 
 
-def first_element(model, state, h: float, p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """(x₀, f₀): the base point and the first element's fibre of the run from ``state`` (a
-    :class:`.results.State`) at step ``h`` and parameter vector ``p``."""
+class TransformError(ValueError):
+    """The transform failed for the ``index``-th state of a batch."""
+
+    def __init__(self, message: str, index: int):
+        super().__init__(message)
+        self.index = index
+
+
+def state_arrays(model, state) -> tuple[np.ndarray, np.ndarray]:
+    """The position x and velocity v of ``state``, checked (x on its manifold)."""
     if model.order != 1 or "legendre" not in model.info["kernels"]:
         raise ValueError(f"model {model.name!r}: a State starts first-order models only "
                          f"(this one is of order {model.order}); give its first "
@@ -40,22 +47,59 @@ def first_element(model, state, h: float, p: np.ndarray) -> tuple[np.ndarray, np
     x = arguments.finite_array(state.x if model.m else [], (model.m,), "the state's position x")
     if model.m:
         check_base_points(model, x[None, :], "the state's position x")
-    momentum = model.kernel_outputs("legendre", np.concatenate([x, v]), p, h)[0]
-    f = x + h * v if model.info["node_pairs"] else v.copy()
-    for _ in range(MAXITER):
-        value, jacobian = model.kernel_outputs("momentum_minus", np.concatenate([x, f]), p, h)
-        J = jacobian.reshape(model.n, model.m + model.n)[:, model.m:]
-        try:
-            delta = np.linalg.solve(J, momentum - value)
-        except np.linalg.LinAlgError:
-            raise ValueError(f"the discrete Legendre transform at this state is singular "
-                             f"(∂F⁻L_d/∂f₀ is not invertible at h = {h:g})") from None
-        f = f + delta
-        if not np.isfinite(f).all():
-            break
-        if np.abs(delta).max() <= XTOL * (1.0 + np.abs(f).max()):
-            return x, f
-    raise ValueError(f"the discrete Legendre transform from this state did not converge in "
-                     f"{MAXITER} Newton iterations at h = {h:g} (the velocity too large for "
-                     f"the step?); take a smaller h or give the first element")
+    return x, v
 
+
+def first_fibres(model, X: np.ndarray, V: np.ndarray, H: np.ndarray,
+                 P: np.ndarray) -> np.ndarray:
+    """The first fibres f₀ of c states at once (positions X (c, m), velocities V (c, n),
+    steps H (c,), parameter rows P (c, np)): Newton on all of them together, each state's
+    iterates the same as alone (it stops when its own correction is small);
+    :class:`TransformError` names the first state that fails."""
+    c, m, n = len(X), model.m, model.n
+    P = np.ascontiguousarray(P)
+    momentum = _points(model, "legendre", np.hstack([X, V]), P, H)[0]
+    F = X + H[:, None] * V if model.info["node_pairs"] else V.copy()
+    active = np.arange(c)
+    for _ in range(MAXITER):
+        value, jacobian = _points(model, "momentum_minus", np.hstack([X[active], F[active]]),
+                                  P[active], H[active])
+        J = jacobian.reshape(len(active), n, m + n)[:, :, m:]
+        delta = _solve(J, momentum[active] - value, active, H)
+        F[active] = F[active] + delta
+        bad = ~np.isfinite(F[active]).all(axis=1)
+        if bad.any():
+            break
+        small = np.abs(delta).max(axis=1) <= XTOL * (1.0 + np.abs(F[active]).max(axis=1))
+        active = active[~small]
+        if not active.size:
+            return F
+    j = int(active[np.flatnonzero(bad)[0]] if bad.any() else active[0])
+    raise TransformError(f"the discrete Legendre transform from this state did not converge "
+                         f"in {MAXITER} Newton iterations at h = {H[j]:g} (the velocity too "
+                         f"large for the step?); take a smaller h or give the first element", j)
+
+
+def _solve(J: np.ndarray, rhs: np.ndarray, active: np.ndarray, H: np.ndarray) -> np.ndarray:
+    """The Newton corrections of the active states; a singular J names its state."""
+    try:
+        return np.linalg.solve(J, rhs[:, :, None])[:, :, 0]
+    except np.linalg.LinAlgError:
+        for i, matrix in enumerate(J):
+            try:
+                np.linalg.solve(matrix, rhs[i])
+            except np.linalg.LinAlgError:
+                j = int(active[i])
+                raise TransformError(f"the discrete Legendre transform at this state is "
+                                     f"singular (∂F⁻L_d/∂f₀ is not invertible at h = "
+                                     f"{H[j]:g})", j) from None
+        raise
+
+
+def _points(model, kernel: str, Z: np.ndarray, P: np.ndarray, H: np.ndarray) -> list:
+    """The outputs of ``kernel`` at the rows of Z, each with its parameters and step."""
+    Z, H = np.ascontiguousarray(Z), np.ascontiguousarray(H, dtype=float)
+    outs = [np.zeros((len(Z), size)) for size in model.info["kernels"][kernel]["outputs"]]
+    getattr(model.lib, f"symvi_{kernel}_points")(len(Z), model.ptr(Z), model.ptr(P), P.shape[1],
+                                                 model.ptr(H), *[model.ptr(o) for o in outs])
+    return outs

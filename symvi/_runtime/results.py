@@ -361,15 +361,22 @@ class BatchResult(_Result):
             else:
                 arrays[name], lengths[name] = _pad(values, pad)
         statuses = np.array([int(r.status) for r in results], dtype=np.int8)
+        messages = tuple(r.message for r in results)
+        status, message = cls.summary(statuses, messages)
+        return cls(status=status, message=message, statuses=statuses, messages=messages,
+                   lengths=lengths, **arrays)
+
+    @staticmethod
+    def summary(statuses: np.ndarray, messages) -> tuple[Status, str]:
+        """The batch's status and message from its trajectories'."""
         failed = np.flatnonzero(statuses != Status.SUCCESS)
         status = Status(statuses[failed[0]]) if failed.size else Status.SUCCESS
-        message = f"{len(results) - failed.size} of {len(results)} trajectories succeeded"
+        message = f"{len(statuses) - failed.size} of {len(statuses)} trajectories succeeded"
         if failed.size:
             message += "; failed: " + "; ".join(
-                f"trajectory {b} ({Status(statuses[b]).name}: {results[b].message})"
+                f"trajectory {b} ({Status(statuses[b]).name}: {messages[b]})"
                 for b in failed[:3]) + ("; …" if failed.size > 3 else "")
-        return cls(status=status, message=message, statuses=statuses,
-                   messages=tuple(r.message for r in results), lengths=lengths, **arrays)
+        return status, message
 
     @property
     def succeeded(self) -> np.ndarray:

@@ -89,9 +89,7 @@ def run_steps(model, initial, n_steps: int, h: float, params, maxiter: int, xtol
     """:func:`integrate`, stopping (:class:`Stopped`) between two chunks once ``stop`` is
     set: how a batch (:mod:`.batch`) ends its worker threads promptly."""
     from_state, K = isinstance(initial, State), model.stencil_elements
-    n_steps = arguments.count(n_steps, "n_steps", K - 1, why=(
-        f" (the initial data's {K - 1} elements count among the steps)" if K > 2
-        else " (the initial data's element counts among the steps)"))
+    n_steps = step_count(model, n_steps)
     keep = arguments.count(keep_every, "keep_every", 1)
     h = arguments.step_size(h)
     maxiter = arguments.iterations(maxiter)
@@ -103,16 +101,30 @@ def run_steps(model, initial, n_steps: int, h: float, params, maxiter: int, xtol
     run = _Run(model, new, keep, p, h, stop)
     code, steps, rnorm, iterations = run.loop(z0, g0, maxiter, xtol, ftol)
     status = Status(code)
-    if status == Status.SUCCESS:
-        message = f"integrated {n_steps} step{'s' * (n_steps != 1)}" + (
-            " (the first by the discrete Legendre transform)" if from_state
-            else f" (the first {K - 1} given)" if K > 2 else " (the first given)")
-    else:
-        reason = _FAILURE[status].format(maxiter=maxiter, iterations=iterations)
-        message = (f"step {K + steps} of {n_steps} (to t = {(K + steps) * h:.6g}) failed: "
-                   f"{reason}; residual norm {rnorm:.3e}")
+    message = outcome(status, n_steps, K, from_state, steps, h, maxiter, iterations, rnorm)
     result = run.result(steps, status, message)
     return result.raise_for_status() if raise_on_failure else result
+
+
+def step_count(model, n_steps) -> int:
+    """n_steps checked: an integer, at least the K − 1 elements of the initial data."""
+    K = model.stencil_elements
+    return arguments.count(n_steps, "n_steps", K - 1, why=(
+        f" (the initial data's {K - 1} elements count among the steps)" if K > 2
+        else " (the initial data's element counts among the steps)"))
+
+
+def outcome(status: Status, n_steps: int, K: int, from_state: bool, steps: int, h: float,
+            maxiter: int, iterations: int, rnorm: float) -> str:
+    """The message of a run of ``n_steps`` steps whose C loop ended with ``status`` after
+    ``steps`` new steps (the failed one took ``iterations``, its residual ``rnorm``)."""
+    if status == Status.SUCCESS:
+        return f"integrated {n_steps} step{'s' * (n_steps != 1)}" + (
+            " (the first by the discrete Legendre transform)" if from_state
+            else f" (the first {K - 1} given)" if K > 2 else " (the first given)")
+    reason = _FAILURE[status].format(maxiter=maxiter, iterations=iterations)
+    return (f"step {K + steps} of {n_steps} (to t = {(K + steps) * h:.6g}) failed: "
+            f"{reason}; residual norm {rnorm:.3e}")
 
 
 @dataclass(frozen=True)
@@ -128,7 +140,7 @@ class _Quantity:
     first: int = 0
 
 
-def _layout(model) -> tuple[list[_Quantity], dict[str, tuple[int, int, tuple]]]:
+def layout(model) -> tuple[list[_Quantity], dict[str, tuple[int, int, tuple]]]:
     """The derived quantities, and every stored field as (lag, offset, shape): a path of E
     elements has E + lag entries of the field, entry i belonging to node i + offset.
 
@@ -167,7 +179,7 @@ class _Run:
         m, n, K = model.m, model.n, model.stencil_elements
         E, G = K - 1 + n_steps, model.info["configuration_dim"]
         self.G = G
-        self.quantities, self.fields = _layout(model)
+        self.quantities, self.fields = layout(model)
         self.series = {name: Series.empty(E + lag, offset, keep, shape,
                                           np.intc if name == "newton_iterations" else float)
                        for name, (lag, offset, shape) in self.fields.items()}
@@ -248,14 +260,14 @@ class _Run:
         out |= {name: self.series[name].until(elements + lag)
                 for name, (lag, _, _) in self.fields.items()}
         if status == Status.SUCCESS:
-            status, message = _finite(out, message, self.h * self.keep)
+            status, message = finite(out, message, self.h * self.keep)
         if self.G:
             out["g"] = self.model.configurations(out["g"])
         out["t"] = self.h * (self.keep * np.arange(out["x"].shape[0]))
         return StepResult(status=status, message=message, **out)
 
 
-def _finite(out: dict, message: str, spacing: float) -> tuple[Status, str]:
+def finite(out: dict, message: str, spacing: float) -> tuple[Status, str]:
     """NON_FINITE, naming the first quantity and time, when an output is not finite."""
     for name in ("x", "f", "g", "momenta", "energy", "noether"):
         values = out.get(name)

@@ -1,0 +1,116 @@
+"""The batch loop in C: slices of a batch stepped by one ``symvi_integrate_batch`` call.
+
+Each trajectory of a slice is the single run's C loop on the same data, and its momenta,
+energies and conserved quantities the same path kernels on the same windows, so the
+numbers are the single call's bit for bit. What the single run does around its C loop per
+trajectory — the result's arrays, the kernels along the path, the thinning to every k-th
+node — is done here once per slice and per field, so that the Python work (which holds the
+GIL) is small beside the C work (which does not), and threads scale.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .results import BatchResult, Status
+from .stepping import finite, layout, outcome
+
+#: Stored bytes of one trajectory's full path above which a batch is run trajectory by
+#: trajectory (the chunked single loop) instead: a slice holds whole paths.
+MAX_PATH_BYTES = 2**24
+#: New steps per slice: about 0.01–0.05 s of C, so that a stop is noticed promptly.
+SLICE_STEPS = 2**16
+
+
+class Stacked:
+    """The batch's stacked arrays, filled slice by slice, padded past failures."""
+
+    def __init__(self, model, B: int, n_steps: int, keep: int):
+        self.model, self.keep, K = model, keep, model.stencil_elements
+        self.fields = layout(model)[1]
+        self.arrays, self.lengths = {}, {}
+        for name, (lag, offset, shape) in self.fields.items():
+            kept = _kept(n_steps + lag, offset, keep)
+            integer = name == "newton_iterations"
+            self.arrays[name] = np.full((B, kept, *shape), -1 if integer else np.nan,
+                                        dtype=np.intc if integer else float)
+            self.lengths[name] = np.zeros(B, dtype=int)
+        self.t = np.full((B, _kept(n_steps + 1, 0, keep)), np.nan)
+        self.statuses = np.zeros(B, dtype=np.int8)
+        self.messages = [""] * B
+        self.K = K
+
+    def result(self) -> BatchResult:
+        arrays = dict(self.arrays)
+        B = len(self.statuses)
+        if "g" in arrays:
+            g = arrays.pop("g")
+            parts = self.model.configurations(g.reshape(-1, g.shape[-1]))
+            arrays["g"] = tuple(p.reshape(B, -1, *p.shape[1:]) for p in parts) \
+                if isinstance(parts, tuple) else parts.reshape(B, -1, *parts.shape[1:])
+        lengths = dict(self.lengths) | {"t": self.lengths["x"]}
+        status, message = BatchResult.summary(self.statuses, self.messages)
+        return BatchResult(t=self.t, statuses=self.statuses, messages=tuple(self.messages),
+                           lengths=lengths, status=status, message=message,
+                           **{"g": None, "energy": None, "noether": None} | arrays)
+
+
+def run_slice(model, stacked: Stacked, indices, starts, n_steps: int, P: np.ndarray,
+              H: np.ndarray, from_state: bool, maxiter: int, xtol: float, ftol: float) -> None:
+    """Step the trajectories ``indices`` (their stencil prefixes and configurations
+    ``starts``, parameter rows P, steps H) by one C call; store them in ``stacked``."""
+    c, K = len(indices), model.stencil_elements
+    new, E = n_steps - (K - 1), n_steps
+    scratch = _scratch(model, stacked.fields, c, E, new)
+    z0 = np.ascontiguousarray(np.stack([z for z, _ in starts]))
+    g0 = np.ascontiguousarray(np.stack([g for _, g in starts]))
+    ffi = model.ffi
+    done, status = np.zeros(c, dtype=np.int_), np.zeros(c, dtype=np.intc)
+    rnorm = np.zeros(c)
+    model.lib.symvi_integrate_batch(
+        c, model.ptr(z0), model.ptr(g0), new, model.ptr(P), P.shape[1], model.ptr(H),
+        maxiter, xtol, ftol, *[model.ptr(scratch[k]) for k in ("x", "f", "g")],
+        ffi.from_buffer("int[]", scratch["newton_iterations"]), ffi.from_buffer("long[]", done),
+        model.ptr(rnorm), ffi.from_buffer("int[]", status),
+        *[model.ptr(scratch[k]) for k in ("momenta", "energy", "noether")])
+    for j, b in enumerate(indices):
+        steps, code = int(done[j]), Status(int(status[j]))
+        tried = int(scratch["newton_iterations"][j, steps]) if code and steps < new else 0
+        message = outcome(code, n_steps, K, from_state, steps, float(H[j]), maxiter, tried,
+                          float(rnorm[j]))
+        _store(model, stacked, b, j, scratch, K - 1 + steps, float(H[j]), code, message)
+
+
+def _scratch(model, fields: dict, c: int, E: int, new: int) -> dict:
+    """Full-path outputs of the C call for c trajectories of E elements."""
+    out = {}
+    for name, (lag, _, shape) in fields.items():
+        integer = name == "newton_iterations"
+        out[name] = np.zeros((c, max(E + lag, 1), *shape), dtype=np.intc if integer else float)
+    for name in ("g", "energy", "noether"):
+        out.setdefault(name, np.zeros((c, 1)))
+    return out
+
+
+def _store(model, stacked: Stacked, b: int, j: int, scratch: dict, elements: int, h: float,
+           code: Status, message: str) -> None:
+    """Trajectory j of the slice, thinned to every keep-th node, as trajectory b."""
+    keep, out = stacked.keep, {}
+    for name, (lag, offset, _) in stacked.fields.items():
+        first = (-offset) % keep
+        values = scratch[name][j, first: max(elements + lag, 0): keep]
+        out[name] = values
+        stacked.arrays[name][b, :len(values)] = values
+        stacked.lengths[name][b] = len(values)
+    nodes = len(out["x"])
+    stacked.t[b, :nodes] = h * (keep * np.arange(nodes))
+    if code == Status.SUCCESS:
+        if "g" in out:
+            out["g"] = model.configurations(out["g"])
+        code, message = finite(out, message, h * keep)
+    stacked.statuses[b], stacked.messages[b] = int(code), message
+
+
+def _kept(total: int, offset: int, keep: int) -> int:
+    """How many of the indices 0 … total − 1 lie on kept nodes (:class:`.storage.Series`)."""
+    first = (-offset) % keep
+    return max(0, -(-(total - first) // keep))
