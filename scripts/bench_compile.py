@@ -1,27 +1,24 @@
 """Compile time and peak memory of ``compile_model`` as a model grows.
 
-Models: the planar n-link pendulum chain with absolute angles (q_i is the angle of link i
-from the downward vertical; point masses m_i at the link ends, rods l_i, gravity g, all
-parameters with unit defaults but g = 9.81; first order, midpoint rule on the pair
-groupoid, declared like the bundled ``double_pendulum``, which is the chain with n = 2)
-for n = 2, 5, 10, 20, and the bundled ``se3_body``.
+Models: the planar n-link pendulum chain in absolute angles (q_i is the angle of link i
+from the downward vertical; point masses m_i at the link ends, rods l_i, gravity g, unit
+defaults but g = 9.81; midpoint rule on the pair groupoid, declared like the bundled
+``double_pendulum``, which is the chain with n = 2) for n = 2, 5, 10, 20, and ``se3_body``.
 
 Each model is compiled by ``compile_model(model, tmp, force=True)`` in a fresh child
-process (this script run with ``--child``), into a fresh temporary folder: neither the
-build cache nor the in-process derivation memo (the only derivation cache the library
-has) can hide any work, and one model's memory does not count against the next. The
-child reports the wall time of the call, the time of each build stage (the build's own
-``StageClock`` lines, ``verbose=True``), its peak RSS (``getrusage``: the Python process,
-derivation and emission) and the largest peak RSS (``VmHWM``, polled every 20 ms from
-``/proc``) of its descendants, the C compile's processes. ``RUSAGE_CHILDREN`` would not
-do: Linux charges a child's maximum RSS with its parent's RSS when the child execs.
+process (this script with ``--child``) and a fresh temporary folder, so that neither the
+build cache nor the in-process derivation memo (the library's only derivation cache)
+hides work and no model's memory counts against the next. Columns: wall time of the
+call; its stages as the build's ``StageClock`` reports them (``verbose=True``); building
+the ``Model`` (declare, outside the call); peak RSS of the Python process (py MB,
+``getrusage``) and the largest ``VmHWM`` of its descendants, the C compile (cc MB, polled
+from ``/proc``: ``RUSAGE_CHILDREN`` would include the parent's RSS at the child's exec).
 
-Printed: a table per model, the exponent p of a least-squares fit wall ∝ n^p (and of the
-derive stage) over the chain sizes, the issue's targets (20 links ≤ 30 s and ≤ 500 MB,
-10 links ≤ 8 s, se3_body ≤ 6 s) with PASS/FAIL, and last ``ratio: X`` with X = (20-link
-wall time) / 30 s (≤ 1 meets the target). A compile that runs longer than ``--timeout``
-(default 900 s) is killed and reported as "> 900 s". BLAS threads are pinned to 1 (by
-importing ``bench_step``).
+Then the exponent p of a least-squares fit wall ∝ n^p (and derive ∝ n^p) over the chain
+sizes, the issue's targets (20 links ≤ 30 s and ≤ 500 MB, 10 links ≤ 8 s, se3_body ≤ 6 s)
+with PASS/FAIL, and last ``ratio: X``, X = (20-link wall time) / 30 s (≤ 1 meets the
+target). A compile running past ``--timeout`` (900 s) is killed and shown as "> 900".
+BLAS threads are pinned to 1 (by importing ``bench_step``).
 
 Run from the repository root: ``python scripts/bench_compile.py`` (``--sizes 2,5,10`` for
 a subset of chain sizes, ``--quick`` for 2 and 5).
@@ -54,6 +51,8 @@ SIZES = (2, 5, 10, 20)
 QUICK = (2, 5)
 SE3 = "se3_body"
 STAGES = ("discretise", "derive", "emit", "C compile")
+HEADERS = ("wall", "discret.", "derive", "emit", "C comp.", "declare", "py MB", "cc MB",
+           "peak MB")
 TARGETS = ((20, "wall", 30.0, "s"), (20, "peak", 500.0, "MB"), (10, "wall", 8.0, "s"),
            (SE3, "wall", 6.0, "s"))
 
@@ -180,13 +179,18 @@ def verdicts(results: dict, timeout: float) -> None:
             print(f"{name} {value:.2f} {unit}  {'PASS' if value <= limit else 'FAIL'}")
 
 
-def main() -> None:
+def arguments() -> argparse.Namespace:
+    """The command line."""
     parser = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     parser.add_argument("--sizes", help="comma-separated chain sizes (default 2,5,10,20)")
     parser.add_argument("--quick", action="store_true", help="chain sizes 2 and 5 only")
     parser.add_argument("--timeout", type=float, default=900.0, help="seconds per model")
     parser.add_argument("--child", help=argparse.SUPPRESS)
-    args = parser.parse_args()
+    return parser.parse_args()
+
+
+def main() -> None:
+    args = arguments()
     if args.child:
         print(json.dumps(measure(args.child)))
         return
@@ -194,15 +198,13 @@ def main() -> None:
         tuple(int(s) for s in args.sizes.split(",")) if args.sizes else SIZES
     print(f"compile_model(force=True), one fresh process and folder per model; "
           f"timeout {args.timeout:g} s; BLAS threads = 1; times in s, memory in MB")
-    print(f"{'model':<10}{'n':>4}  {'wall':>8}  {'discret.':>8}  {'derive':>8}  "
-          f"{'emit':>8}  {'C comp.':>8}  {'declare':>8}  {'py MB':>8}  {'cc MB':>8}  "
-          f"{'peak MB':>8}")
+    print(f"{'model':<10}{'n':>4}" + "".join(f"  {h:>8}" for h in HEADERS))
     results: dict = {}
     for key, name, label, n in [*((s, f"chain{s}", "chain", str(s)) for s in sizes),
                                 (SE3, SE3, SE3, "-")]:
         results[key] = run_child(name, args.timeout)
         print(row(label, n, results[key], args.timeout), flush=True)
-    print(f"growth exponent (log-log fit over n = {', '.join(map(str, sizes))}): "
+    print(f"growth exponent (log-log fit over the chain sizes): "
           f"wall ~ n^{exponent(results, 'wall'):.2f}, "
           f"derive ~ n^{exponent(results, 'derive'):.2f}")
     verdicts(results, args.timeout)

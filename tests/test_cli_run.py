@@ -12,12 +12,15 @@ import re
 import numpy as np
 import pytest
 
+from symvi._runtime.batch import integrate_many
 from symvi._runtime.bvp import solve_bvp
+from symvi._runtime.bvp_batch import continuation, solve_bvp_many
 from symvi._runtime.stepping import integrate
 from symvi.cli import main, parser
 from symvi.models import get
 
-PUBLIC = ("integrate", "solve_bvp", "evaluate", "momenta", "noether")
+PUBLIC = ("integrate", "integrate_many", "solve_bvp", "solve_bvp_many", "continuation",
+          "evaluate", "momenta", "noether")
 
 
 @pytest.fixture(scope="module")
@@ -31,7 +34,8 @@ def test_generated_functions_name_every_option(compiled, name):
     runtime function's every parameter (the model bound), with its default, and the
     ``help()`` text names each of them."""
     module = compiled(name)
-    runtime = {"integrate": integrate, "solve_bvp": solve_bvp}
+    runtime = {"integrate": integrate, "integrate_many": integrate_many, "solve_bvp": solve_bvp,
+               "solve_bvp_many": solve_bvp_many, "continuation": continuation}
     for public in PUBLIC:
         function = getattr(module, public)
         parameters = inspect.signature(function).parameters

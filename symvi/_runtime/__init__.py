@@ -4,7 +4,7 @@ Depends on numpy (and cffi through the extension) only; SciPy is imported lazily
 whole-trajectory solver. Never imports SymPy or symvi.
 """
 from .compiled import CompiledModel
-from .results import BatchResult, BVPResult, NewtonError, State, Status, StepResult
+from .results import BatchResult, BVPBatch, BVPResult, NewtonError, State, Status, StepResult
 
 __all__ = ["CompiledModel", "NewtonError", "State", "StepResult", "BVPResult", "BatchResult",
-           "Status"]
+           "BVPBatch", "Status"]

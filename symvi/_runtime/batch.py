@@ -56,11 +56,11 @@ def integrate_many(model, initial, n_steps: int, h, params: Mapping | None = Non
     is SUCCESS only when every trajectory succeeded.
     """
     item, B = batch_items(initial)
-    steps = _per_trajectory(h, B, "h")
+    steps = per_trajectory(h, B, "h")
     overrides = parameter_batch(params, B)
     n_steps = stepping.step_count(model, n_steps)
     keep = n_steps if final_only else arguments.count(keep_every, "keep_every", 1)
-    workers = arguments.count(workers if workers is not None else _usable_cores(),
+    workers = arguments.count(workers if workers is not None else usable_cores(),
                               "workers", 1)
     maxiter = arguments.iterations(maxiter)
     xtol, ftol = arguments.tolerance(xtol, "xtol"), arguments.tolerance(ftol, "ftol")
@@ -74,11 +74,11 @@ def integrate_many(model, initial, n_steps: int, h, params: Mapping | None = Non
             for b in indices:
                 if stop.is_set():
                     return
-                with _named(b, stop):
+                with NamedErrors(b, stop):
                     results[b] = stepping.run_steps(model, item(b), n_steps, steps[b],
                                                     overrides(b), maxiter, xtol, ftol, keep,
                                                     False, stop)
-        _run(work, B, workers, stop)
+        run_threads(work, B, workers, stop)
         return BatchResult.stacked(results)
     stacked = batch_loop.Stacked(model, B, n_steps, keep)
     per_slice = max(1, batch_loop.SLICE_STEPS // n_steps)
@@ -90,14 +90,14 @@ def integrate_many(model, initial, n_steps: int, h, params: Mapping | None = Non
                 return
             P, H = [], np.empty(len(part))
             for j, b in enumerate(part):
-                with _named(b, stop):
+                with NamedErrors(b, stop):
                     P.append(model.params(overrides(b)))
                     H[j] = arguments.step_size(steps[b])
             P = np.ascontiguousarray(np.stack(P))
             starts = _starts(model, item, part, H, P, from_state, stop)
             batch_loop.run_slice(model, stacked, part, starts, n_steps, P, H, from_state,
                                  maxiter, xtol, ftol)
-    _run(work_in_slices, B, workers, stop)
+    run_threads(work_in_slices, B, workers, stop)
     return stacked.result()
 
 
@@ -108,12 +108,12 @@ def _starts(model, item, part: np.ndarray, H: np.ndarray, P: np.ndarray, from_st
     if not from_state:
         starts = []
         for j, b in enumerate(part):
-            with _named(b, stop):
+            with NamedErrors(b, stop):
                 starts.append(model.initial_state(item(b), H[j], P[j]))
         return starts
     parts = []
     for b in part:
-        with _named(b, stop):
+        with NamedErrors(b, stop):
             parts.append(model.state_parts(item(b)))
     X, V = np.stack([x for x, _, _ in parts]), np.stack([v for _, v, _ in parts])
     try:
@@ -124,12 +124,12 @@ def _starts(model, item, part: np.ndarray, H: np.ndarray, P: np.ndarray, from_st
     return [(np.concatenate([x, f]), g) for (x, _, g), f in zip(parts, F)]
 
 
-class _named:
-    """Re-raise bad data of trajectory b (ValueError, MemoryError) naming it, after
-    stopping the other workers; a stopped run just returns."""
+class NamedErrors:
+    """Re-raise bad data of member b (ValueError, MemoryError) naming it — "trajectory
+    b", or ``noun`` — after stopping the other workers; a stopped run just returns."""
 
-    def __init__(self, b: int, stop: threading.Event):
-        self.b, self.stop = b, stop
+    def __init__(self, b: int, stop: threading.Event, noun: str = "trajectory"):
+        self.b, self.stop, self.noun = b, stop, noun
 
     def __enter__(self):
         return self
@@ -139,11 +139,11 @@ class _named:
             return True
         if kind is not None and issubclass(kind, (ValueError, MemoryError)):
             self.stop.set()
-            raise kind(f"trajectory {self.b}: {exc}") from None
+            raise kind(f"{self.noun} {self.b}: {exc}") from None
         return False
 
 
-def _run(work: Callable[[np.ndarray], None], B: int, workers: int,
+def run_threads(work: Callable[[np.ndarray], None], B: int, workers: int,
          stop: threading.Event) -> None:
     """``work`` on parts of range(B) in ``workers`` threads; the first error (or Ctrl-C)
     sets ``stop``, and no thread outlives the call."""
@@ -205,12 +205,12 @@ def parameter_batch(params: Mapping | None, B: int) -> Callable[[int], dict | No
         return lambda b: None
     if not isinstance(params, Mapping):
         raise ValueError(f"params must be a mapping name → value(s), got {type(params).__name__}")
-    columns = {name: _per_trajectory(value, B, f"params[{name!r}]")
+    columns = {name: per_trajectory(value, B, f"params[{name!r}]")
                for name, value in params.items()}
     return lambda b: {name: column[b] for name, column in columns.items()}
 
 
-def _per_trajectory(value, B: int, what: str) -> np.ndarray:
+def per_trajectory(value, B: int, what: str) -> np.ndarray:
     array = arguments.real_array(value, what)
     try:
         return np.broadcast_to(array, (B,))
@@ -219,7 +219,7 @@ def _per_trajectory(value, B: int, what: str) -> np.ndarray:
                          f"of {B} trajectories (give one value, or {B})") from None
 
 
-def _usable_cores() -> int:
+def usable_cores() -> int:
     try:
         return len(os.sched_getaffinity(0))
     except AttributeError:         # not on Linux

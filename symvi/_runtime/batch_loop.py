@@ -72,12 +72,38 @@ def run_slice(model, stacked: Stacked, indices, starts, n_steps: int, P: np.ndar
         ffi.from_buffer("int[]", scratch["newton_iterations"]), ffi.from_buffer("long[]", done),
         model.ptr(rnorm), ffi.from_buffer("int[]", status),
         *[model.ptr(scratch[k]) for k in ("momenta", "energy", "noether")])
-    for j, b in enumerate(indices):
+    completed = _store_completed(model, stacked, np.asarray(indices), scratch, status == 0,
+                                 E, H, outcome(Status.SUCCESS, n_steps, K, from_state, 0, 0.0,
+                                               maxiter, 0, 0.0))
+    for j in np.flatnonzero(~completed):
         steps, code = int(done[j]), Status(int(status[j]))
         tried = int(scratch["newton_iterations"][j, steps]) if code and steps < new else 0
         message = outcome(code, n_steps, K, from_state, steps, float(H[j]), maxiter, tried,
                           float(rnorm[j]))
-        _store(model, stacked, b, j, scratch, K - 1 + steps, float(H[j]), code, message)
+        _store(model, stacked, indices[j], j, scratch, K - 1 + steps, float(H[j]), code,
+               message)
+
+
+def _store_completed(model, stacked: Stacked, indices: np.ndarray, scratch: dict,
+                     ok: np.ndarray, E: int, H: np.ndarray, message: str) -> np.ndarray:
+    """Store the slice's runs that completed every step with finite outputs, all at once
+    (one thinning per field); return which they were (the others: :func:`_store`)."""
+    keep, thinned = stacked.keep, {}
+    for name, (lag, offset, _) in stacked.fields.items():
+        thinned[name] = scratch[name][:, (-offset) % keep: max(E + lag, 0): keep]
+        if name != "newton_iterations":
+            finite = np.isfinite(thinned[name].reshape(len(ok), -1)).all(axis=1)
+            ok = ok & finite
+    rows = indices[ok]
+    for name, values in thinned.items():
+        stacked.arrays[name][rows, :values.shape[1]] = values[ok]
+        stacked.lengths[name][rows] = values.shape[1]
+    nodes = thinned["x"].shape[1]
+    stacked.t[rows, :nodes] = H[ok, None] * (keep * np.arange(nodes))
+    stacked.statuses[rows] = int(Status.SUCCESS)
+    for b in rows:
+        stacked.messages[b] = message
+    return ok
 
 
 def _scratch(model, fields: dict, c: int, E: int, new: int) -> dict:

@@ -9,6 +9,7 @@ import numpy as np
 from . import arguments
 from .batch import integrate_many
 from .bvp import solve_bvp
+from .bvp_batch import continuation, solve_bvp_many
 from .geometry import check_base_points, check_configurations
 from .legendre import first_fibres, state_arrays
 from .paths import increments
@@ -195,6 +196,14 @@ class CompiledModel:
     def solve_bvp(self, start, end, n_steps: int, h: float | None = None, params=None,
                   **options):
         return solve_bvp(self, start, end, n_steps, h, params, **options)
+
+    @_documented_by(solve_bvp_many)
+    def solve_bvp_many(self, starts, ends, n_steps: int, h=None, params=None, **options):
+        return solve_bvp_many(self, starts, ends, n_steps, h, params, **options)
+
+    @_documented_by(continuation)
+    def continuation(self, start, end, n_steps: int, h=None, path=None, **options):
+        return continuation(self, start, end, n_steps, h, path, **options)
 
     @property
     def matrix_dims(self) -> tuple[int, ...]:

@@ -78,7 +78,8 @@ class NewtonError(RuntimeError):
 
 def _rebuild(kind: str, state: dict):
     """A result of class ``kind`` from its fields (the target of pickling)."""
-    return {"StepResult": StepResult, "BVPResult": BVPResult, "BatchResult": BatchResult}[kind](
+    return {"StepResult": StepResult, "BVPResult": BVPResult, "BatchResult": BatchResult,
+            "BVPBatch": BVPBatch}[kind](
         **state | {"status": Status(state["status"])})
 
 
@@ -366,15 +367,39 @@ class BatchResult(_Result):
         return cls(status=status, message=message, statuses=statuses, messages=messages,
                    lengths=lengths, **arrays)
 
+    @classmethod
+    def joined(cls, parts: list) -> "BatchResult":
+        """One batch from the consecutive batches ``parts`` of one run (the chunks of a
+        run on a cluster)."""
+        arrays = {}
+        for name, pad in _STACKED.items():
+            values = [getattr(part, name) for part in parts]
+            if values[0] is None:
+                arrays[name] = None
+            elif isinstance(values[0], tuple):
+                arrays[name] = tuple(_join([v[i] for v in values], pad)
+                                     for i in range(len(values[0])))
+            else:
+                arrays[name] = _join(values, pad)
+        statuses = np.concatenate([part.statuses for part in parts])
+        messages = tuple(m for part in parts for m in part.messages)
+        lengths = {k: np.concatenate([part.lengths[k] for part in parts])
+                   for k in parts[0].lengths}
+        status, message = cls.summary(statuses, messages)
+        return cls(status=status, message=message, statuses=statuses, messages=messages,
+                   lengths=lengths, **arrays)
+
     @staticmethod
-    def summary(statuses: np.ndarray, messages) -> tuple[Status, str]:
-        """The batch's status and message from its trajectories'."""
+    def summary(statuses: np.ndarray, messages, one: str = "trajectory",
+                many: str = "trajectories") -> tuple[Status, str]:
+        """The batch's status and message from its members' (``one``, ``many``: what
+        they are called)."""
         failed = np.flatnonzero(statuses != Status.SUCCESS)
         status = Status(statuses[failed[0]]) if failed.size else Status.SUCCESS
-        message = f"{len(statuses) - failed.size} of {len(statuses)} trajectories succeeded"
+        message = f"{len(statuses) - failed.size} of {len(statuses)} {many} succeeded"
         if failed.size:
             message += "; failed: " + "; ".join(
-                f"trajectory {b} ({Status(statuses[b]).name}: {messages[b]})"
+                f"{one} {b} ({Status(statuses[b]).name}: {messages[b]})"
                 for b in failed[:3]) + ("; …" if failed.size > 3 else "")
         return status, message
 
@@ -400,6 +425,72 @@ class BatchResult(_Result):
                 f"{len(self)} trajectories of up to {self.t.shape[1]} nodes>")
 
 
+@dataclass(frozen=True, repr=False)
+class BVPBatch(_Result):
+    """Whole-trajectory solves of a batch (``solve_bvp_many``, ``continuation``), in order.
+
+    ``result[b]`` is solve b's :class:`BVPResult`; ``statuses``, ``succeeded``, ``cost``
+    and ``T`` are arrays over the batch (cost NaN where a solve has none), and
+    :meth:`stack` stacks one field of every solve. ``status`` is SUCCESS only when every
+    solve succeeded; ``message`` counts the failures and names the first few.
+    """
+
+    results: tuple
+    status: Status
+    message: str
+
+    @classmethod
+    def of(cls, results: list) -> "BVPBatch":
+        statuses = np.array([int(r.status) for r in results], dtype=np.int8)
+        status, message = BatchResult.summary(statuses, [r.message for r in results],
+                                              "solve", "solves")
+        return cls(results=tuple(results), status=status, message=message)
+
+    @property
+    def statuses(self) -> np.ndarray:
+        return np.array([int(r.status) for r in self.results], dtype=np.int8)
+
+    @property
+    def succeeded(self) -> np.ndarray:
+        return self.statuses == Status.SUCCESS
+
+    @property
+    def cost(self) -> np.ndarray:
+        return np.array([np.nan if r.cost is None else r.cost for r in self.results])
+
+    @property
+    def T(self) -> np.ndarray:
+        return np.array([r.T for r in self.results])
+
+    def stack(self, name: str) -> np.ndarray:
+        """Field ``name`` (``"x"``, ``"g"``, ``"controls"``, …) of every solve, stacked."""
+        return np.stack([getattr(r, name) for r in self.results])
+
+    def __len__(self) -> int:
+        return len(self.results)
+
+    def __getitem__(self, b: int) -> BVPResult:
+        return self.results[b]
+
+    def save(self, file) -> None:
+        raise TypeError("save each solve (result[b].save(...)) or the arrays of stack(...)")
+
+    def __repr__(self) -> str:
+        return f"<BVPBatch {self.status.name}: {self.message[:100]!r}; {len(self)} solves>"
+
+
+def _join(batches: list, pad) -> np.ndarray:
+    """Batched arrays (B_i, L_i, …) joined on the batch axis, padded to the longest L."""
+    width = max(b.shape[1] for b in batches)
+    out = np.full((sum(len(b) for b in batches), width, *batches[0].shape[2:]), pad,
+                  dtype=batches[0].dtype)
+    at = 0
+    for b in batches:
+        out[at:at + len(b), :b.shape[1]] = b
+        at += len(b)
+    return out
+
+
 def _pad(arrays: list, pad) -> tuple[np.ndarray, np.ndarray]:
     """The arrays stacked on a new first axis, the shorter ones padded at the end; and
     the length of each."""
@@ -413,7 +504,7 @@ def _pad(arrays: list, pad) -> tuple[np.ndarray, np.ndarray]:
 
 #: The names every copy of this file takes from the canonical module.
 SHARED = ("Status", "NewtonError", "State", "StepResult", "BVPResult", "BatchResult",
-          "_rebuild")
+          "BVPBatch", "_rebuild")
 
 
 def _share() -> None:
