@@ -66,7 +66,12 @@ def _run(folder: str, method: str, args: tuple, options: dict, where: tuple[int,
     """On a worker: load the package (once per process) and run ``method`` on a chunk."""
     from symvi.build import load
 
-    package = load(folder)
+    try:
+        package = load(folder)
+    except (ImportError, OSError) as exc:
+        raise ImportError(f"cannot load the package {folder} on a worker: {exc} — the "
+                          f"workers must read the folder under the same path (a shared "
+                          f"file system), with symvi installed") from None
     args = tuple(package.State(**a[1]) if isinstance(a, tuple) and a[:1] == (_STATE,) else a
                  for a in args)
     try:

@@ -56,3 +56,15 @@ def test_bad_data_in_a_chunk_names_it(client, compiled):
     with pytest.raises(ValueError, match=r"in the chunk of members 4–5: trajectory 0: .*l1"):
         symvi.dask.integrate_many(client, module, start, 10, 0.01,
                                   {"l1": [1.0, 1.0, 1.0, 1.0, -1.0, 1.0]}, chunk=4)
+
+
+def test_a_worker_that_cannot_load_the_package_says_so(client, tmp_path):
+    """The package's folder gone before the tasks run (as on a worker without the shared
+    file system): the error names the folder and says how to make it readable."""
+    import shutil
+
+    module = compile_model(get("pendulum"), tmp_path / "build", force=True)
+    shutil.rmtree(tmp_path / "build")
+    with pytest.raises(ImportError, match=r"cannot load the package .*build.* on a worker"):
+        symvi.dask.integrate_many(client, module, module.State(x=np.zeros((2, 1)),
+                                                               v=np.zeros((2, 1))), 10, 0.01)
