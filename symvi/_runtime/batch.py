@@ -144,7 +144,7 @@ class NamedErrors:
 
 
 def run_threads(work: Callable[[np.ndarray], None], B: int, workers: int,
-         stop: threading.Event) -> None:
+                stop: threading.Event) -> None:
     """``work`` on parts of range(B) in ``workers`` threads; the first error (or Ctrl-C)
     sets ``stop``, and no thread outlives the call."""
     tasks = np.array_split(np.arange(B), min(B, workers * TASKS_PER_WORKER))

@@ -13,6 +13,7 @@ import numpy as np
 
 from .results import BatchResult, Status
 from .stepping import finite, layout, outcome
+from .storage import first_kept, kept_count
 
 #: Stored bytes of one trajectory's full path above which a batch is run trajectory by
 #: trajectory (the chunked single loop) instead: a slice holds whole paths.
@@ -25,19 +26,18 @@ class Stacked:
     """The batch's stacked arrays, filled slice by slice, padded past failures."""
 
     def __init__(self, model, B: int, n_steps: int, keep: int):
-        self.model, self.keep, K = model, keep, model.stencil_elements
+        self.model, self.keep = model, keep
         self.fields = layout(model)[1]
         self.arrays, self.lengths = {}, {}
         for name, (lag, offset, shape) in self.fields.items():
-            kept = _kept(n_steps + lag, offset, keep)
+            kept = kept_count(n_steps + lag, offset, keep)
             integer = name == "newton_iterations"
             self.arrays[name] = np.full((B, kept, *shape), -1 if integer else np.nan,
                                         dtype=np.intc if integer else float)
             self.lengths[name] = np.zeros(B, dtype=int)
-        self.t = np.full((B, _kept(n_steps + 1, 0, keep)), np.nan)
+        self.t = np.full((B, kept_count(n_steps + 1, 0, keep)), np.nan)
         self.statuses = np.zeros(B, dtype=np.int8)
         self.messages = [""] * B
-        self.K = K
 
     def result(self) -> BatchResult:
         arrays = dict(self.arrays)
@@ -60,7 +60,7 @@ def run_slice(model, stacked: Stacked, indices, starts, n_steps: int, P: np.ndar
     ``starts``, parameter rows P, steps H) by one C call; store them in ``stacked``."""
     c, K = len(indices), model.stencil_elements
     new, E = n_steps - (K - 1), n_steps
-    scratch = _scratch(model, stacked.fields, c, E, new)
+    scratch = _scratch(stacked.fields, c, E)
     z0 = np.ascontiguousarray(np.stack([z for z, _ in starts]))
     g0 = np.ascontiguousarray(np.stack([g for _, g in starts]))
     ffi = model.ffi
@@ -90,7 +90,7 @@ def _store_completed(model, stacked: Stacked, indices: np.ndarray, scratch: dict
     (one thinning per field); return which they were (the others: :func:`_store`)."""
     keep, thinned = stacked.keep, {}
     for name, (lag, offset, _) in stacked.fields.items():
-        thinned[name] = scratch[name][:, (-offset) % keep: max(E + lag, 0): keep]
+        thinned[name] = scratch[name][:, first_kept(offset, keep): max(E + lag, 0): keep]
         if name != "newton_iterations":
             finite = np.isfinite(thinned[name].reshape(len(ok), -1)).all(axis=1)
             ok = ok & finite
@@ -106,7 +106,7 @@ def _store_completed(model, stacked: Stacked, indices: np.ndarray, scratch: dict
     return ok
 
 
-def _scratch(model, fields: dict, c: int, E: int, new: int) -> dict:
+def _scratch(fields: dict, c: int, E: int) -> dict:
     """Full-path outputs of the C call for c trajectories of E elements."""
     out = {}
     for name, (lag, _, shape) in fields.items():
@@ -122,8 +122,7 @@ def _store(model, stacked: Stacked, b: int, j: int, scratch: dict, elements: int
     """Trajectory j of the slice, thinned to every keep-th node, as trajectory b."""
     keep, out = stacked.keep, {}
     for name, (lag, offset, _) in stacked.fields.items():
-        first = (-offset) % keep
-        values = scratch[name][j, first: max(elements + lag, 0): keep]
+        values = scratch[name][j, first_kept(offset, keep): max(elements + lag, 0): keep]
         out[name] = values
         stacked.arrays[name][b, :len(values)] = values
         stacked.lengths[name][b] = len(values)
@@ -135,8 +134,3 @@ def _store(model, stacked: Stacked, b: int, j: int, scratch: dict, elements: int
         code, message = finite(out, message, h * keep)
     stacked.statuses[b], stacked.messages[b] = int(code), message
 
-
-def _kept(total: int, offset: int, keep: int) -> int:
-    """How many of the indices 0 … total − 1 lie on kept nodes (:class:`.storage.Series`)."""
-    first = (-offset) % keep
-    return max(0, -(-(total - first) // keep))

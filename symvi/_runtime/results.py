@@ -494,12 +494,7 @@ def _join(batches: list, pad) -> np.ndarray:
 def _pad(arrays: list, pad) -> tuple[np.ndarray, np.ndarray]:
     """The arrays stacked on a new first axis, the shorter ones padded at the end; and
     the length of each."""
-    lengths = np.array([len(a) for a in arrays])
-    out = np.full((len(arrays), lengths.max(), *arrays[0].shape[1:]), pad,
-                  dtype=arrays[0].dtype)
-    for b, a in enumerate(arrays):
-        out[b, :len(a)] = a
-    return out, lengths
+    return _join([a[None] for a in arrays], pad), np.array([len(a) for a in arrays])
 
 
 #: The names every copy of this file takes from the canonical module.

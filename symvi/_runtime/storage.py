@@ -18,6 +18,17 @@ import numpy as np
 from .memory import SMALL, available_bytes, require
 
 
+def first_kept(offset: int, keep: int) -> int:
+    """The first index on a kept node, when index i belongs to node i + ``offset``."""
+    return (-offset) % keep
+
+
+def kept_count(total: int, offset: int, keep: int) -> int:
+    """How many of the indices 0 … total − 1 lie on kept nodes (also the position of
+    the first kept index ≥ total)."""
+    return max(0, -(-(total - first_kept(offset, keep)) // keep))
+
+
 @dataclass
 class Series:
     """One stored array: ``total`` values of a running index, whose node is the index plus
@@ -36,8 +47,7 @@ class Series:
 
     def _position(self, index: int) -> int:
         """Position in ``values`` of the first kept index ≥ ``index``."""
-        first = (-self.offset) % self.keep        # the first index on a kept node
-        return max(0, -(-(index - first) // self.keep))
+        return kept_count(index, self.offset, self.keep)
 
     def kept(self, total: int) -> int:
         """How many of the indices 0 … total − 1 are kept."""
@@ -48,7 +58,7 @@ class Series:
         stop = min(start + len(values), self.total)
         at, end = self._position(start), self._position(stop)
         if end > at:
-            first = at * self.keep + (-self.offset) % self.keep
+            first = at * self.keep + first_kept(self.offset, self.keep)
             self.values[at:end] = values[first - start: stop - start: self.keep]
 
     def until(self, total: int) -> np.ndarray:
