@@ -1,4 +1,5 @@
-"""Command line: ``symvi compile``, ``symvi run``, ``symvi check`` and ``symvi list``.
+"""Command line: ``symvi compile``, ``symvi run``, ``symvi sweep``, ``symvi check`` and
+``symvi list``.
 
 Exit codes: 0 success, 1 a build, a solve or a check failed, 2 bad input (model or
 arguments).
@@ -142,6 +143,62 @@ def _outputs(result, model, module, args) -> None:
         print(f"plot       {args.plot}")
 
 
+def _sweep(args) -> int:
+    """``symvi sweep``: the example once per value of one swept parameter or step."""
+    from .build import compile_model
+    from .sweep import geometric, parse_range, run_sweep
+    model = load(args.model)
+    ex = model.example
+    if ex is None:
+        raise ModelError(f"model {model.name!r} declares no example run")
+    swept = [item for item in args.param or () if ":" in item.partition("=")[2]]
+    h_values = parse_range(args.h, "--h") if args.h is not None else None
+    if len(swept) + (h_values is not None) != 1:
+        raise ValueError("sweep one quantity: give exactly one --param NAME=start:stop:count "
+                         "or --h start:stop:count (the other --param values are fixed)")
+    params = _parameters([item for item in args.param or () if item not in swept], model)
+    if swept:
+        name, _, text = swept[0].partition("=")
+        name = name.strip()
+        _parameters([f"{name}=0"], model)          # the name is checked like a fixed one
+        values = parse_range(text, f"--param {name}")
+    else:
+        name, values = "h", h_values
+    if name == "h" and ex.whole_trajectory:
+        raise ValueError("an optimal-control sweep varies a parameter; the step of a whole "
+                         "trajectory follows from --steps and its horizon")
+    if args.spacing == "log":
+        values = geometric(values, f"--{'param ' + name if swept else 'h'}")
+    if args.plot:
+        _check_plot_support()
+    steps = args.steps if args.steps is not None else ex.n_steps
+    h = float(args.h) if args.h is not None and h_values is None else \
+        ex.h * ex.n_steps / steps if ex.whole_trajectory else ex.h
+    module = compile_model(model, args.build_dir)
+    print(f"model      {model.name} — {model.description}")
+    print(f"sweep      {name} = {values[0]:g} … {values[-1]:g} ({len(values)} values, "
+          f"{args.spacing}), {steps} steps{'' if name == 'h' else f' of h = {h:g}'}")
+    if name == "h" and ex.state is None:
+        print("note       the example starts from nodes: its initial velocity (q₁ − q₀)/h "
+              "changes with h")
+    start = time.perf_counter()
+    result = run_sweep(module, ex, name, values, steps=steps, h=h, params=params,
+                       workers=args.workers, keep_every=args.keep_every,
+                       progress=False if args.quiet else None)
+    print(f"time       {time.perf_counter() - start:.2f} s")
+    for line in result.format():
+        print(line)
+    output = args.output or f"{model.name}_sweep.npz"
+    result.save(output)
+    print(f"output     {output}")
+    if args.plot:
+        from .plots import plot_sweep
+        plot_sweep(result, f"{model.name}: {result.succeeded.sum()} of {len(values)} "
+                           f"succeeded", args.plot, log_x=args.spacing == "log")
+        print(f"plot       {args.plot}")
+    return 0 if result.success else 1
+
+
 def _parameters(given: list[str] | None, model) -> dict[str, float]:
     """``--param NAME=VALUE`` (repeated) as a mapping, each name a parameter of ``model``
     and each value a finite number."""
@@ -260,6 +317,7 @@ def parser() -> argparse.ArgumentParser:
                    help="write a plot of the result: configuration, velocities, and the "
                         "energy error or the controls (needs matplotlib)")
     r.set_defaults(func=_run)
+    _sweep_parser(sub)
     k = sub.add_parser("check", help="run the derivation checks on MODEL (exit 0: all "
                                      "pass, 1: a check failed, 2: bad input)")
     k.add_argument("model", help="a model file (.py defining `model` and optionally "
@@ -272,6 +330,49 @@ def parser() -> argparse.ArgumentParser:
     ls = sub.add_parser("list", help="list the bundled models")
     ls.set_defaults(func=_list)
     return p
+
+
+def _sweep_parser(sub) -> None:
+    w = sub.add_parser("sweep", help="run MODEL's example over a range of one parameter or "
+                                     "of the step; write the batch to .npz",
+                       description="Compile MODEL (cached) and run its example once per "
+                                   "value of one swept quantity — a parameter "
+                                   "(--param NAME=start:stop:count) or the step "
+                                   "(--h start:stop:count) — as one batch on all cores "
+                                   "(an optimal-control example: a continuation, each solve "
+                                   "warm-started from the last). Each run is judged by its "
+                                   "energy error (or conserved quantities' drift, or Newton "
+                                   "iterations), or by the optimal cost. Writes the batch "
+                                   "to a NumPy archive and, with --plot, the judgement "
+                                   "against the swept values. Exit 0 when every run "
+                                   "succeeded, 1 otherwise, 2 on bad input.")
+    w.add_argument("model", help="a model file (.py defining `model`) or a bundled model "
+                                 "name (symvi list)")
+    w.add_argument("--param", action="append", metavar="NAME=start:stop:count",
+                   help="the swept parameter (start:stop:count), or a fixed one (NAME=VALUE); "
+                        "repeat for several")
+    w.add_argument("--h", default=None, metavar="H|start:stop:count",
+                   help="the step, fixed or swept (a swept step keeps the number of steps); "
+                        "default: the example's")
+    w.add_argument("--steps", type=int, default=None,
+                   help="steps per run (N of an optimal-control example, whose horizon is "
+                        "kept); default: the example's")
+    w.add_argument("--spacing", choices=("linear", "log"), default="linear",
+                   help="spacing of the swept values (log: geometric, e.g. for steps)")
+    w.add_argument("--workers", type=int, default=None,
+                   help="threads (default: the usable cores)")
+    w.add_argument("--keep-every", type=int, default=1, metavar="K",
+                   help="store only every K-th node of each run (long or many runs)")
+    w.add_argument("--build-dir", default="generated", metavar="DIR",
+                   help="where the compiled package goes (default: generated)")
+    w.add_argument("-o", "--output", default=None, metavar="FILE.npz",
+                   help="the archive to write (default: MODEL_sweep.npz); numpy.load "
+                        "reads it")
+    w.add_argument("--plot", default=None, metavar="FILE.png",
+                   help="write the summary plot: the judgement against the swept values "
+                        "(needs matplotlib)")
+    w.add_argument("--quiet", action="store_true", help="no progress bar")
+    w.set_defaults(func=_sweep)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -20,6 +20,7 @@ here) and the same Python, NumPy and C ABI as the machine that compiled the pack
 """
 from __future__ import annotations
 
+from dataclasses import fields
 from pathlib import Path
 from types import ModuleType
 from typing import Mapping
@@ -27,28 +28,37 @@ from typing import Mapping
 import numpy as np
 
 from ._runtime.batch import batch_items
-from ._runtime.results import BatchResult, BVPBatch, State
+from ._runtime.progress import Progress
+from ._runtime.results import BatchResult, BVPBatch, State, Status
 
 
 def integrate_many(client, package: ModuleType, initial, n_steps: int, h,
                    params: Mapping | None = None, *, chunk: int = 1000,
-                   **options) -> BatchResult:
+                   progress: bool | None = None, **options) -> BatchResult:
     """``package.integrate_many`` on the workers of ``client`` (a
     ``dask.distributed.Client``), ``chunk`` trajectories per task; ``options`` as there
-    (``workers=`` is per task). Returns the :class:`BatchResult` the local call returns."""
+    (``workers=``: threads per task, default 1 — a Dask worker runs as many tasks at
+    once as it has threads). ``progress``: a bar of finished trajectories here, as in
+    the local call. Returns the :class:`BatchResult` the local call returns."""
+    B = batch_items(initial)[1]
     parts = _chunks(initial, h, params, chunk)
-    futures = [client.submit(_run, _folder(package), "integrate_many",
+    options = {"workers": 1} | options | {"progress": False}
+    futures = [client.submit(_run_fields, _folder(package), "integrate_many",
                              (_plain(start), n_steps, step),
                              dict(options, params=values), where, pure=False)
                for start, step, values, where in parts]
-    return BatchResult.joined(client.gather(futures))
+    return BatchResult.joined([_batch(fields) for fields in
+                               _gathered(client, futures, B, "trajectories",
+                                                         progress)])
 
 
 def solve_bvp_many(client, package: ModuleType, starts, ends, n_steps: int, h=None,
                    params: Mapping | None = None, *, chunk: int = 10,
-                   **options) -> BVPBatch:
-    """``package.solve_bvp_many`` on the workers of ``client``, ``chunk`` solves per task.
-    Returns the :class:`BVPBatch` the local call returns."""
+                   progress: bool | None = None, **options) -> BVPBatch:
+    """``package.solve_bvp_many`` on the workers of ``client``, ``chunk`` solves per task;
+    ``progress`` as in :func:`integrate_many`. Returns the :class:`BVPBatch` the local
+    call returns."""
+    options = options | {"progress": False}
     start_of, B = batch_items(starts)
     end_of = None if ends is None else batch_items(ends)[0]
     futures = []
@@ -59,7 +69,26 @@ def solve_bvp_many(client, package: ModuleType, starts, ends, n_steps: int, h=No
             (_gather(start_of, rows), None if end_of is None else _gather(end_of, rows),
              n_steps, _rows(h, rows, B)),
             dict(options, params=_rows_of(params, rows, B)), (a, rows[-1]), pure=False))
-    return BVPBatch.of([r for batch in client.gather(futures) for r in batch.results])
+    return BVPBatch.of([r for batch in _gathered(client, futures, B, "solves", progress)
+                        for r in batch.results])
+
+
+def _gathered(client, futures: list, B: int, what: str, progress: bool | None) -> list:
+    """The futures' results in order, gathered as they finish (a bar counts the B
+    members); on an error or Ctrl-C the tasks not yet run are cancelled."""
+    from distributed import as_completed
+
+    index = {future.key: i for i, future in enumerate(futures)}
+    out = [None] * len(futures)
+    try:
+        with Progress(B, what, progress) as bar:
+            for future, result in as_completed(futures, with_results=True):
+                out[index[future.key]] = result
+                bar.update(len(result["statuses"] if isinstance(result, dict) else result))
+    except BaseException:
+        client.cancel(futures)
+        raise
+    return out
 
 
 def _run(folder: str, method: str, args: tuple, options: dict, where: tuple[int, int]):
@@ -78,6 +107,18 @@ def _run(folder: str, method: str, args: tuple, options: dict, where: tuple[int,
         return getattr(package, method)(*args, **options)
     except ValueError as exc:
         raise ValueError(f"in the chunk of members {where[0]}–{where[1]}: {exc}") from None
+
+
+def _run_fields(*args) -> dict:
+    """:func:`_run` returning the batch's fields: plain arrays travel through Dask's
+    NumPy serialisation, about five times faster than the pickled result object."""
+    result = _run(*args)
+    return {f.name: getattr(result, f.name) for f in fields(result)} | \
+        {"status": int(result.status)}
+
+
+def _batch(values: dict) -> BatchResult:
+    return BatchResult(**values | {"status": Status(values["status"])})
 
 
 #: A State travels as (_STATE, its fields): a worker that has imported no package yet

@@ -89,3 +89,39 @@ def _lines(ax, t: np.ndarray, values: np.ndarray, names: Sequence[str], label: s
         ax.plot(t, values[:, i], label=names[i] if i < len(names) else f"{label}[{i}]")
     ax.set_ylabel(label)
     ax.legend(loc="best", fontsize="small")
+
+
+def plot_sweep(sweep: Any, title: str, file: str | os.PathLike, log_x: bool = False) -> None:
+    """Write the summary plot of a ``symvi sweep`` (a :class:`symvi.sweep.Sweep`): what
+    judges each member (the energy error, a drift, the Newton iterations or the cost)
+    against the swept values, on a logarithmic axis where it spans decades; members that
+    failed marked with a cross at the bottom of the axes."""
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise ValueError(MISSING) from None
+    ok = sweep.succeeded
+    fig, ax = plt.subplots(figsize=(7, 4.5), constrained_layout=True)
+    ax.plot(sweep.values[ok], sweep.measure[ok], "o-", ms=4, label="succeeded")
+    positive = sweep.measure[ok][np.isfinite(sweep.measure[ok])]
+    if positive.size and (positive > 0).all() and positive.max() > 10 * positive.min():
+        ax.set_yscale("log")
+    if log_x:
+        ax.set_xscale("log")
+    if (~ok).any():
+        low = np.nanmin(positive) if positive.size else 0.0
+        ax.plot(sweep.values[~ok], np.full((~ok).sum(), low), "x", color="C3", ms=8,
+                label=f"failed ({(~ok).sum()})")
+    slope = sweep.slope()
+    if slope is not None:
+        ax.set_title(f"{title}\nfitted order: {sweep.measure_name} ∝ h^{slope:.2f}")
+    else:
+        ax.set_title(title)
+    ax.set_xlabel(sweep.name)
+    ax.set_ylabel(sweep.measure_name)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(loc="best", fontsize="small")
+    fig.savefig(os.fspath(file), dpi=100)
+    plt.close(fig)

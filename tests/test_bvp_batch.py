@@ -85,3 +85,22 @@ def test_bad_batches_are_refused(slew, call, pattern):
     module, start, end, h = slew
     with pytest.raises(ValueError, match=pattern):
         call(module, start, end, h)
+
+
+def test_ctrl_c_stops_a_batch_of_solves_promptly(slew):
+    """Ctrl-C 0.2 s into about 4 s of solves: KeyboardInterrupt once the solves under way
+    end (each a few milliseconds here), and no worker thread left."""
+    import _thread
+    import threading
+    import time
+
+    module, start, end, h = slew
+    B = 400
+    timer = threading.Timer(0.2, _thread.interrupt_main)
+    began = time.perf_counter()
+    timer.start()
+    with pytest.raises(KeyboardInterrupt):
+        module.solve_bvp_many(np.repeat(start[None], B, 0), np.repeat(end[None], B, 0), N, h,
+                              workers=2)
+    assert time.perf_counter() - began < 0.7
+    assert not [t for t in threading.enumerate() if t.name.startswith("symvi")]

@@ -23,6 +23,7 @@ from . import arguments, batch_loop, stepping
 from .legendre import TransformError, first_fibres
 from .results import BatchResult, State, StepResult
 from .memory import require
+from .progress import Progress
 from .storage import bytes_per_node
 
 #: Tasks per worker: small enough tasks that a slow trajectory does not idle the others.
@@ -31,7 +32,8 @@ TASKS_PER_WORKER = 8
 
 def integrate_many(model, initial, n_steps: int, h, params: Mapping | None = None, *,
                    workers: int | None = None, keep_every: int = 1, final_only: bool = False,
-                   maxiter: int = 50, xtol: float = 1e-12, ftol: float = 0.0) -> BatchResult:
+                   maxiter: int = 50, xtol: float = 1e-12, ftol: float = 0.0,
+                   progress: bool | None = None) -> BatchResult:
     """Integrate a batch of trajectories of ``n_steps`` steps each, in parallel threads.
 
     Parameters
@@ -49,6 +51,8 @@ def integrate_many(model, initial, n_steps: int, h, params: Mapping | None = Non
         :func:`.stepping.integrate`), or only the first and the final node, so that many
         long trajectories fit in memory.
     maxiter, xtol, ftol : Newton's options of every step (see :func:`.stepping.integrate`).
+    progress : a progress bar of finished trajectories on stderr (``tqdm``): True, False,
+        or None for one when tqdm is installed and stderr is a terminal.
 
     Returns a :class:`BatchResult`: every array of :class:`StepResult` with a leading
     batch axis, each trajectory's status and message (``statuses``, ``messages``), and
@@ -65,40 +69,67 @@ def integrate_many(model, initial, n_steps: int, h, params: Mapping | None = Non
     maxiter = arguments.iterations(maxiter)
     xtol, ftol = arguments.tolerance(xtol, "xtol"), arguments.tolerance(ftol, "ftol")
     _check_memory(model, B, n_steps, keep)
-    stop = threading.Event()
-    if bytes_per_node(model) * (n_steps + 1) > batch_loop.MAX_PATH_BYTES:
-        # long runs: one by one through the chunked single loop, bounded memory
-        results: list[StepResult | None] = [None] * B
+    run = _Run(model, item, B, isinstance(initial, State), steps, overrides, n_steps, keep,
+               (maxiter, xtol, ftol))
+    long = bytes_per_node(model) * (n_steps + 1) > batch_loop.MAX_PATH_BYTES
+    with Progress(B, "trajectories", progress) as bar:
+        # long runs one by one through the chunked single loop: bounded memory
+        return (run.one_by_one if long else run.in_slices)(workers, bar)
+
+
+class _Run:
+    """A checked batch: its members' data and the two ways of running it."""
+
+    def __init__(self, model, item, B: int, from_state: bool, steps: np.ndarray, overrides,
+                 n_steps: int, keep: int, newton: tuple):
+        self.model, self.item, self.B, self.from_state = model, item, B, from_state
+        self.steps, self.overrides, self.n_steps, self.keep = steps, overrides, n_steps, keep
+        self.newton = newton
+        self.stop = threading.Event()
+
+    def one_by_one(self, workers: int, bar: Progress) -> BatchResult:
+        """Each trajectory by :func:`.stepping.run_steps`, then stacked."""
+        results: list[StepResult | None] = [None] * self.B
 
         def work(indices: np.ndarray) -> None:
             for b in indices:
-                if stop.is_set():
+                if self.stop.is_set():
                     return
-                with NamedErrors(b, stop):
-                    results[b] = stepping.run_steps(model, item(b), n_steps, steps[b],
-                                                    overrides(b), maxiter, xtol, ftol, keep,
-                                                    False, stop)
-        run_threads(work, B, workers, stop)
+                with NamedErrors(b, self.stop):
+                    results[b] = stepping.run_steps(
+                        self.model, self.item(b), self.n_steps, self.steps[b],
+                        self.overrides(b), *self.newton, self.keep, False, self.stop)
+                bar.update()
+        run_threads(work, self.B, workers, self.stop)
         return BatchResult.stacked(results)
-    stacked = batch_loop.Stacked(model, B, n_steps, keep)
-    per_slice = max(1, batch_loop.SLICE_STEPS // n_steps)
-    from_state = isinstance(initial, State)
 
-    def work_in_slices(indices: np.ndarray) -> None:
-        for part in np.array_split(indices, -(-len(indices) // per_slice)):
-            if stop.is_set():
-                return
-            P, H = [], np.empty(len(part))
-            for j, b in enumerate(part):
-                with NamedErrors(b, stop):
-                    P.append(model.params(overrides(b)))
-                    H[j] = arguments.step_size(steps[b])
-            P = np.ascontiguousarray(np.stack(P))
-            starts = _starts(model, item, part, H, P, from_state, stop)
-            batch_loop.run_slice(model, stacked, part, starts, n_steps, P, H, from_state,
-                                 maxiter, xtol, ftol)
-    run_threads(work_in_slices, B, workers, stop)
-    return stacked.result()
+    def in_slices(self, workers: int, bar: Progress) -> BatchResult:
+        """Slices of trajectories by one C call each, stored into one stacked result."""
+        stacked = batch_loop.Stacked(self.model, self.B, self.n_steps, self.keep)
+        per_slice = max(1, batch_loop.SLICE_STEPS // self.n_steps)
+
+        def work(indices: np.ndarray) -> None:
+            parts = np.array_split(indices, -(-len(indices) // per_slice))
+            buffers = batch_loop.Scratch(stacked.fields, len(parts[0]), self.n_steps)
+            for part in parts:
+                if self.stop.is_set():
+                    return
+                P, H = self._slice_data(part)
+                starts = _starts(self.model, self.item, part, H, P, self.from_state, self.stop)
+                batch_loop.run_slice(self.model, stacked, buffers, part, starts,
+                                     self.n_steps, P, H, self.from_state, *self.newton)
+                bar.update(len(part))
+        run_threads(work, self.B, workers, self.stop)
+        return stacked.result()
+
+    def _slice_data(self, part: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The parameter rows and steps of the trajectories ``part``."""
+        P, H = [], np.empty(len(part))
+        for j, b in enumerate(part):
+            with NamedErrors(b, self.stop):
+                P.append(self.model.params(self.overrides(b)))
+                H[j] = arguments.step_size(self.steps[b])
+        return np.ascontiguousarray(np.stack(P)), H
 
 
 def _starts(model, item, part: np.ndarray, H: np.ndarray, P: np.ndarray, from_state: bool,

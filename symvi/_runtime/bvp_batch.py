@@ -18,12 +18,13 @@ import numpy as np
 from . import arguments
 from .batch import NamedErrors, per_trajectory, run_threads, usable_cores, batch_items, parameter_batch
 from .bvp import solve_bvp
+from .progress import Progress
 from .results import BVPBatch, BVPResult
 
 
 def solve_bvp_many(model, starts, ends, n_steps: int, h=None, params: Mapping | None = None,
                    *, T=None, guesses: list | None = None, workers: int | None = None,
-                   **options) -> BVPBatch:
+                   progress: bool | None = None, **options) -> BVPBatch:
     """Solve a batch of whole-trajectory problems on worker threads.
 
     Parameters
@@ -35,6 +36,8 @@ def solve_bvp_many(model, starts, ends, n_steps: int, h=None, params: Mapping | 
     params : parameter overrides, each a number or B of them.
     guesses : a first guess per solve (anything ``guess=`` takes), or None.
     workers : threads (default: the cores this process may use).
+    progress : a progress bar of finished solves (``tqdm``): True, False, or None for one
+        when tqdm is installed and stderr is a terminal.
     options : ``maxiter``, ``xtol``, ``ftol`` of :func:`.bvp.solve_bvp`.
 
     Returns a :class:`BVPBatch`: ``result[b]`` is solve b's :class:`BVPResult`, ``cost``,
@@ -63,12 +66,15 @@ def solve_bvp_many(model, starts, ends, n_steps: int, h=None, params: Mapping | 
                     None if steps is None else float(steps[b]), overrides(b),
                     T=None if horizons is None else float(horizons[b]),
                     guess=None if guesses is None else guesses[b], **options)
-    run_threads(work, B, workers, stop)
+            bar.update()
+    with Progress(B, "solves", progress) as bar:
+        run_threads(work, B, workers, stop)
     return BVPBatch.of(results)
 
 
 def continuation(model, start, end, n_steps: int, h=None, path: Mapping | None = None, *,
-                 T=None, params: Mapping | None = None, guess=None, **options) -> BVPBatch:
+                 T=None, params: Mapping | None = None, guess=None,
+                 progress: bool | None = None, **options) -> BVPBatch:
     """Solve along a path of parameter values, each solve warm-started from the last
     success.
 
@@ -80,6 +86,7 @@ def continuation(model, start, end, n_steps: int, h=None, path: Mapping | None =
     guess : the first solve's guess (default: the cubic guess). Solve k starts from the
         last solve before it that succeeded (its path, multipliers and, with bounds, its
         active set), or cold if none did.
+    progress : a progress bar of finished solves, as in :func:`solve_bvp_many`.
     options : ``maxiter``, ``xtol``, ``ftol`` of :func:`.bvp.solve_bvp`.
 
     Returns a :class:`BVPBatch` of the K solves in order, whose message names the
@@ -92,14 +99,17 @@ def continuation(model, start, end, n_steps: int, h=None, path: Mapping | None =
     lengths = {name: len(values) for name, values in columns.items()}
     if len(set(lengths.values())) != 1:
         raise ValueError(f"path: the sequences differ in length: {lengths}")
+    K = next(iter(lengths.values()))
     results, previous = [], guess
-    for k in range(next(iter(lengths.values()))):
-        point = dict(params or {}) | {name: values[k] for name, values in columns.items()}
-        result = solve_bvp(model, start, end, n_steps, h, point, T=T, guess=previous,
-                           **options)
-        results.append(result)
-        if result.success:
-            previous = result
+    with Progress(K, "solves", progress) as bar:
+        for k in range(K):
+            point = dict(params or {}) | {name: values[k] for name, values in columns.items()}
+            result = solve_bvp(model, start, end, n_steps, h, point, T=T, guess=previous,
+                               **options)
+            results.append(result)
+            bar.update()
+            if result.success:
+                previous = result
     return BVPBatch.of(results)
 
 

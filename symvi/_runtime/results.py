@@ -153,17 +153,7 @@ class _Result:
                 arrays.update({f"{field.name}_{i}": v for i, v in enumerate(value)})
             else:
                 arrays[field.name] = np.asarray(value)
-        target = os.path.abspath(os.fspath(file))
-        # beside the target (os.replace within one file system), with the umask's mode
-        temporary = f"{target}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
-        try:
-            with open(temporary, "xb") as out:
-                np.savez(out, **arrays)
-            os.replace(temporary, target)
-        except BaseException:
-            if os.path.exists(temporary):
-                os.unlink(temporary)
-            raise
+        write_npz(file, arrays)
 
     def __reduce__(self):
         state = {f.name: getattr(self, f.name) for f in fields(self)}
@@ -477,6 +467,21 @@ class BVPBatch(_Result):
 
     def __repr__(self) -> str:
         return f"<BVPBatch {self.status.name}: {self.message[:100]!r}; {len(self)} solves>"
+
+
+def write_npz(file: str | os.PathLike, arrays: dict) -> None:
+    """Write ``arrays`` to the NumPy archive ``file`` atomically: it appears whole or not
+    at all (written beside it, then renamed, with the umask's mode)."""
+    target = os.path.abspath(os.fspath(file))
+    temporary = f"{target}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
+    try:
+        with open(temporary, "xb") as out:
+            np.savez(out, **arrays)
+        os.replace(temporary, target)
+    except BaseException:
+        if os.path.exists(temporary):
+            os.unlink(temporary)
+        raise
 
 
 def _join(batches: list, pad) -> np.ndarray:
