@@ -188,3 +188,18 @@ def _rotation(a: np.ndarray) -> np.ndarray:
     theta = np.linalg.norm(a)
     K = np.array([[0, -a[2], a[1]], [a[2], 0, -a[0]], [-a[1], a[0], 0]]) / theta
     return np.eye(3) + np.sin(theta) * K + (1 - np.cos(theta)) * K @ K
+
+
+def test_overflowing_outputs_are_never_a_success(compiled):
+    """Trajectories whose energies overflow (|x| = 1e160, 1e300) end NON_FINITE in a batch
+    as alone — same status and message as the single call — beside one that succeeds."""
+    mod = compiled("harmonic_oscillator")
+    x = np.array([[1.0], [1e160], [1e300]])
+    batch = mod.integrate_many(mod.State(x=x, v=np.zeros((3, 1))), 10, 0.1)
+    assert [mod.Status(s).name for s in batch.statuses] == ["SUCCESS", "NON_FINITE",
+                                                            "NON_FINITE"]
+    assert not batch.success
+    for b in range(3):
+        single = mod.integrate(mod.State(x=x[b], v=[0.0]), 10, 0.1)
+        assert (batch.statuses[b], batch.messages[b]) == (single.status, single.message)
+    assert "overflow double precision" in batch.messages[2]
