@@ -162,3 +162,26 @@ def derived(prebuilt):
 
 
 __all__ = ["BOUNDED", "BUNDLED", "FIRST_ORDER", "SECOND_ORDER", "PAIR", "LIE", "ACTION", "CONTROL"]
+
+
+@pytest.fixture
+def ctrl_c():
+    """``arm()``: Ctrl-C 0.2 s from then (``_thread.interrupt_main``); returns the time it
+    was armed. Python's SIGINT handler is in place for the test: a process started in the
+    background by a shell without job control inherits SIGINT ignored, and then the
+    simulated Ctrl-C would do nothing."""
+    import _thread
+    import signal
+    import time
+
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    timer = threading.Timer(0.2, _thread.interrupt_main)
+
+    def arm() -> float:
+        timer.start()
+        return time.perf_counter()
+    try:
+        yield arm
+    finally:
+        timer.cancel()
+        signal.signal(signal.SIGINT, previous)

@@ -143,18 +143,15 @@ def test_a_rotation_off_the_group_names_its_trajectory(compiled):
 
 @pytest.mark.parametrize("B, n_steps, keep", [(4, 3_000_000, 1000), (20_000, 1000, 1000)],
                          ids=["long runs one by one", "short runs in C slices"])
-def test_ctrl_c_stops_every_worker_promptly(compiled, B, n_steps, keep):
+def test_ctrl_c_stops_every_worker_promptly(compiled, B, n_steps, keep, ctrl_c):
     """Ctrl-C 0.2 s into a batch of about 4 s of work — four 3·10⁶-step runs (the chunked
     single loop), or 2·10⁴ runs of 10³ steps (the batch loop in C, slice by slice): the
     batch raises KeyboardInterrupt within half a second and no worker thread is left."""
-    import _thread
     import time
 
     mod = compiled("double_pendulum")
     start = states(mod, B)
-    timer = threading.Timer(0.2, _thread.interrupt_main)
-    began = time.perf_counter()
-    timer.start()
+    began = ctrl_c()
     with pytest.raises(KeyboardInterrupt):
         mod.integrate_many(start, n_steps, 0.001, workers=2, keep_every=keep)
     assert time.perf_counter() - began < 0.7
