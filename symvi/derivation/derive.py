@@ -33,7 +33,7 @@ from ..discretisation.discretise import DiscreteModel
 from ..errors import ModelError
 from ..groupoids.analytic import used_coefficients
 from ..declaration.rank import generic_rank
-from .differentiate import gradient_and_hessian, jacobian
+from .differentiate import gradient, gradient_and_hessian, jacobian
 
 
 @dataclass(frozen=True)
@@ -196,8 +196,7 @@ class _Engine:
         self.dm = dm
         augmented = dm.lagrangian + sum(
             l * c for l, c in zip(dm.window_multipliers, dm.window_constraints))
-        self.gradients = tuple(
-            sp.Matrix([sp.diff(augmented, s) for s in x + f]) for x, f in dm.slots)
+        self.gradients = tuple(gradient(augmented, x + f) for x, f in dm.slots)
 
     def _window_mapping(self, st: _Stencil, w: int) -> dict:
         own = self.dm.window_multipliers

@@ -116,6 +116,11 @@ def jacobian(F: sp.Matrix, z: Sequence[sp.Symbol],
         return _sympy_jacobian(F, z, chain)
 
 
+def gradient(f: sp.Expr, z: Sequence[sp.Symbol]) -> sp.Matrix:
+    """The column ∂f/∂z of a scalar f."""
+    return jacobian(sp.Matrix([f]), z).T
+
+
 def gradient_and_hessian(f: sp.Expr, z: Sequence[sp.Symbol]) -> tuple[sp.Matrix, sp.Matrix]:
     """The row ∂f/∂z and the matrix ∂²f/∂z² of a scalar f."""
     try:
