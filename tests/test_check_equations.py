@@ -264,3 +264,36 @@ equations = [HandDerived("my notes p. 3", "controls", [
     assert result["details"] == ["my notes p. 3, eq. 3: vs derived eq. 3: "
                                  "spurious I3*Omega1*Omega2",
                                  "agree: my notes p. 3 (eq. 1, eq. 2)"]
+
+
+def test_a_function_of_time_that_names_nothing_is_named_with_what_was_declared():
+    """Issue 26, item 3: ERRATA 8's optimality conditions with the multiplier λ¹(t)
+    written λ(t). Before, the derivatives of λ(t) crashed the comparison (a raw
+    ValueError) and without them it said "undefined symbol t". Now λ(t) is named once,
+    with the declared multipliers, and each term it enters is located against λ¹."""
+    t = sp.Symbol("t")
+    rows = [r.xreplace({sp.Function("lambda1")(t): sp.Function("lambda")(t)})
+            for r in HEAVY.optimality_conditions(printed=False)]
+    result = compare(HandDerived("λ(t)", "euler_lagrange", rows, labels=HEAVY._LABELS),
+                     HEAVY.model)
+    details = result.details()
+    assert not result.ok and "undefined symbol" not in "\n".join(details)
+    notes = [line for line in details if "function of time" in line]
+    assert notes == ["λ(t): lambda(t) (and its derivatives) is a function of time that "
+                     "names no declared quantity — the model's quantities are symbols, or "
+                     "functions of time named like them; declared: lambda1, lambda2, "
+                     "lambda3"]
+    assert "-Gamma3*Mgh*lambda(t) where -Gamma3*Mgh*lambda1 is right" in "\n".join(details)
+    assert result.to_dict()["functions"] == [notes[0].split(": ", 1)[1]]
+
+
+def test_functions_of_time_named_like_the_model_quantities_are_those_quantities():
+    """Ω₁(t) and its derivative Ω̇₁(t) in the rigid body's controlled equations are the
+    model symbols Omega1 and Omega1_dot: the correct display written so passes."""
+    t = sp.Symbol("t")
+    omega = sp.Function("Omega1")(t)
+    rows = [e.xreplace({W_dot[0]: omega.diff(t)}).xreplace({W[0]: omega})
+            for e in (E1, E2, E3)]
+    assert rows[1].has(omega) and rows[0].has(omega.diff(t))
+    result = rigid(rows)
+    assert result.ok, result.details()

@@ -61,6 +61,8 @@ class Comparison:
     summary: str
     equations: tuple[EquationResult, ...] = ()
     undefined: tuple[str, ...] = ()
+    #: a note per function of time that names no model quantity
+    functions: tuple[str, ...] = ()
 
     def details(self) -> list[str]:
         """One line per problem, each starting with the display's name (its location)."""
@@ -68,6 +70,7 @@ class Comparison:
         if self.undefined:
             lines.append(f"{self.hand.name}: undefined symbol{'s' * (len(self.undefined) > 1)} "
                          f"{', '.join(self.undefined)}")
+        lines += [f"{self.hand.name}: {note}" for note in self.functions]
         lines += [f"{self.hand.name}, {r.label}: {r.message}" for r in self.equations if not r.ok]
         if self.equations and not self.ok and all(r.ok for r in self.equations):
             lines.append(f"{self.hand.name}: {self.summary}")
@@ -76,6 +79,7 @@ class Comparison:
     def to_dict(self) -> dict:
         return {"name": self.hand.name, "target": self.hand.target, "mode": self.hand.mode,
                 "ok": self.ok, "summary": self.summary, "undefined": list(self.undefined),
+                "functions": list(self.functions),
                 "equations": [r.to_dict() for r in self.equations]}
 
 
@@ -114,18 +118,20 @@ def compare(hand: HandDerived, model=None, discrete: DiscreteModel | None = None
     else:
         results = _compare_equations(resolved, derived_exprs, hand, space)
     if isinstance(results, str):
-        return Comparison(hand, False, results, (), resolved.undefined)
+        return Comparison(hand, False, results, (), resolved.undefined,
+                          tuple(dict.fromkeys(resolved.functions.values())))
     if hand.target == "discrete_action" and not all(r.ok for r in results):
         results = _miscounted_terms(hand, model, discrete) or results
-    ok = all(r.ok for r in results) and not resolved.undefined
+    ok = all(r.ok for r in results) and not resolved.undefined and not resolved.functions
     wrong = [r.label for r in results if not r.ok]
     if ok:
         summary = f"agrees with the derived {hand.target}"
     elif wrong:
         summary = f"differs from the derived {hand.target} in {', '.join(wrong)}"
     else:
-        summary = "uses undefined symbols"
-    return Comparison(hand, ok, summary, tuple(results), resolved.undefined)
+        summary = "uses undefined symbols or functions"
+    return Comparison(hand, ok, summary, tuple(results), resolved.undefined,
+                      tuple(dict.fromkeys(resolved.functions.values())))
 
 
 def _miscounted_terms(hand: HandDerived, model, discrete) -> list | None:
@@ -172,8 +178,8 @@ def _compare_values(hand: Hand, derived: list, spec: HandDerived):
         if is_zero(H - D):
             results.append(EquationResult(label, True, "equal"))
             continue
-        variables = set(hand.space.variables) | {s for s in H.free_symbols
-                                                  if s.name in hand.undefined}
+        variables = set(hand.space.variables) | {
+            s for s in H.free_symbols if s.name in hand.undefined or s.name in hand.functions}
         proportional = D != 0 and _proportional_at_samples(H, D, variables,
                                                              hand.space.fixed)
         ratio = sp.cancel(H / D) if proportional else sp.zoo

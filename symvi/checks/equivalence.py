@@ -11,13 +11,16 @@ mis-scaled (:func:`scaled_increments`), named constants with the wrong value
 """
 from __future__ import annotations
 
+import re
 from collections import Counter
 from typing import TYPE_CHECKING, Any, Mapping
 
 import sympy as sp
+from sympy.core.function import AppliedUndef
 
 from ..discretisation.discretise import h as STEP
 from ..declaration.rank import generic_rank
+from .jets import derivative_name
 from .series import vanishes_at
 from .spaces import Space
 
@@ -31,6 +34,53 @@ _MAX_GROUPS = 8
 def _plain(expr: sp.Expr) -> sp.Expr:
     """Every symbol replaced by a plain Symbol of its name (symbols compare by name)."""
     return expr.xreplace({s: sp.Symbol(s.name) for s in expr.free_symbols})
+
+
+def functions_of_time(expr: sp.Expr, names) -> tuple[sp.Expr, dict[str, str]]:
+    """``expr`` with each undefined function of one variable F(t), and its derivatives,
+    made a plain symbol; and a note per such function that names no model quantity.
+
+    A display may write the model's quantities as functions of time: Ω₁(t) is the model
+    symbol Omega1 and its k-th derivative the jet symbol of that name
+    (:func:`~symvi.checks.jets.derivative_name`: ``Omega1_dot``, …, ``Omega1_d4``) where
+    the model declares it. Anything else — λ(t) where the multipliers are lambda1,
+    lambda2, lambda3 — becomes a placeholder symbol printed as the term itself, so that
+    the comparison goes on with it undefined (and shows "lambda(t) where lambda1 is
+    right"), and its note names the declared quantities it may have meant. ``names``:
+    the model's symbol names."""
+    names = set(names)
+    replacements, notes = {}, {}
+    terms = [(d, d.expr, sum(count for _, count in d.variable_count))
+             for d in expr.atoms(sp.Derivative) if _function_of_time(d.expr)]
+    terms += [(f, f, 0) for f in expr.atoms(AppliedUndef) if _function_of_time(f)]
+    for term, f, order in terms:
+        name = derivative_name(f.func.__name__, order)
+        replacements[term] = sp.Symbol(name if name in names else str(term))
+        if name not in names:
+            notes[str(term)] = _function_note(f, names)
+    return expr.xreplace(replacements) if replacements else expr, notes
+
+
+def _function_of_time(f) -> bool:
+    return isinstance(f, AppliedUndef) and len(f.args) == 1
+
+
+def _function_note(f: sp.Expr, names: set) -> str:
+    """Why the function of time ``f`` (with its derivatives) names no model quantity,
+    with the declared quantities it may have meant: those starting like it, not their
+    derivatives."""
+    stem = f.func.__name__.lower()[:3]
+    similar = sorted(n for n in names if n.lower().startswith(stem)
+                     and not _JET_SUFFIX.search(n))
+    hint = f"declared: {', '.join(similar[:8])}{', …' if len(similar) > 8 else ''}" \
+        if similar else "write the display in the model's symbols"
+    return (f"{f} (and its derivatives) is a function of time that names no declared "
+            f"quantity — the model's quantities are symbols, or functions of time named "
+            f"like them; {hint}")
+
+
+#: The suffixes of derivatives' jet symbols (Omega1_dot, …, Omega1_d4).
+_JET_SUFFIX = re.compile(r"_(d+ot|d\d+)$")
 
 
 def _substitute(expr: sp.Expr, table: Mapping[str, sp.Expr], depth: int = 12) -> sp.Expr:
@@ -200,9 +250,15 @@ class Hand:
     and in the user's own symbols (``own``), and how to show derived ones in the latter."""
 
     def __init__(self, hand: HandDerived, space: Space):
-        convert = space.convert or (lambda e: e)
-        keys = {k: convert(v) for k, v in hand.symbols.items()}
         model_names = set(space.names)
+        #: notes on functions of time that name no model quantity, by their text
+        self.functions: dict[str, str] = {}
+
+        def convert(e):
+            e, notes = functions_of_time((space.convert or (lambda x: x))(e), model_names)
+            self.functions |= notes
+            return e
+        keys = {k: convert(v) for k, v in hand.symbols.items()}
         variables = set(space.variables)
         variable_names = {n for n, s in space.names.items() if s in variables}
         # one display symbol per model symbol (Gamma1 and Gamma1_0 name the same node)
@@ -230,7 +286,8 @@ class Hand:
             own = _plain(_substitute(e, opaque)).xreplace(self.canon).xreplace(reverse)
             self.own.append(own)
             full = _plain(_substitute(e, keys))
-            undefined |= {s.name for s in full.free_symbols if s.name not in model_names}
+            undefined |= {s.name for s in full.free_symbols
+                          if s.name not in model_names and s.name not in self.functions}
             self.math.append(full.xreplace({s: space.names[s.name] for s in full.free_symbols
                                             if s.name in model_names}))
         self.undefined = tuple(sorted(undefined))
