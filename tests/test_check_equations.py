@@ -297,3 +297,23 @@ def test_functions_of_time_named_like_the_model_quantities_are_those_quantities(
     assert rows[1].has(omega) and rows[0].has(omega.diff(t))
     result = rigid(rows)
     assert result.ok, result.details()
+
+
+def test_rows_are_paired_with_derived_equations_one_to_one():
+    """Issue 26, item 2: rows that both look most like derived equation 1 (one and no
+    differing term groups) are paired with equations 1 and 2 by an optimal assignment
+    (3 differing groups in all, against 5 the other way), not both with equation 1 —
+    so the second equation's differences are told against a row of their own. A row
+    no factor relates to any equation stays unpaired."""
+    from symvi.checks.equations import _pairing
+
+    groups = {(0, 0): ["a"], (0, 1): ["b", "c", "d"], (1, 0): [], (1, 1): ["e"] * 5}
+
+    class Fake:
+        math = [None, None, None]
+
+        @staticmethod
+        def locate(i, j):
+            return (None, None) if i == 2 else (1, groups[i, j])
+    pairing = _pairing(Fake, [0, 1])
+    assert [p[0] for p in pairing[:2]] == [1, 0] and pairing[2] is None

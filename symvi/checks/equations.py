@@ -26,7 +26,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+import numpy as np
 import sympy as sp
+from scipy.optimize import linear_sum_assignment
 
 from ..discretisation.discretise import DiscreteModel, discretise
 from ..errors import ModelError
@@ -203,20 +205,35 @@ def _compare_values(hand: Hand, derived: list, spec: HandDerived):
 
 
 def _pairing(hand: Hand, derived: list) -> list:
-    """Per hand expression, (j, c, differing groups) of the derived equation j it matches
-    best up to the factor c (fewest differing groups; its own index first), or None."""
-    n = len(derived)
-    pairing = []
-    for i in range(len(hand.math)):
-        best = None
-        for j in sorted(range(n), key=lambda j: j != i):
-            c, groups = hand.locate(i, derived[j])
-            if c is None:
-                continue
-            if best is None or len(groups) < len(best[2]):
-                best = (j, c, groups)
-        pairing.append(best)
+    """Per hand expression, (j, c, differing groups) of the derived equation j it is
+    paired with, up to the factor c, or None (issue 26, item 2).
+
+    The pairing is an optimal assignment — each derived equation to at most one display
+    row, the total of differing term groups least (SciPy's ``linear_sum_assignment``;
+    ties go to the row's own index) — not each row's own best: three rows that all look
+    most like one equation are paired with three equations, so that each row's
+    difference is told against its own. A row left over (more rows than equations) is
+    paired with the equation it matches best."""
+    located = [[hand.locate(i, D) for D in derived] for i in range(len(hand.math))]
+    if not located or not derived:
+        return [None] * len(located)
+    cost = np.array([[_UNPAIRED if c is None else len(groups) + _OFF_DIAGONAL * (i != j)
+                      for j, (c, groups) in enumerate(row)] for i, row in enumerate(located)])
+    rows, columns = linear_sum_assignment(cost)
+    pairing = [None] * len(located)
+    for i, j in zip(rows, columns):
+        if located[i][j][0] is not None:
+            pairing[i] = (j, *located[i][j])
+    for i, row in enumerate(located):
+        if pairing[i] is None and cost[i].min() < _UNPAIRED:
+            j = int(np.argmin(cost[i]))
+            pairing[i] = (j, *row[j])
     return pairing
+
+
+#: The cost of pairing a row with an equation no factor relates it to, and the tie-break
+#: toward a row's own index.
+_UNPAIRED, _OFF_DIAGONAL = 1e6, 1e-3
 
 
 def _compare_equations(hand: Hand, derived: list, spec: HandDerived, space: Space):
