@@ -11,7 +11,7 @@ cluster started and the package loaded on its workers beforehand); checks that a
 the same numbers bit for bit and that trajectory 0 equals the single ``integrate`` call,
 and prints trajectory-steps per second. Targets on a 2-core machine: 2 threads ≥ 1.8× one,
 the cluster ≥ 1.5× one (measured over three runs: 2.7–3.3 million trajectory-steps/s on
-one thread, 1.89–2.06× on two, 1.56–1.65× on the cluster). The last line is
+one thread, 1.87–2.06× on two, 1.55–1.65× on the cluster). The last line is
 ``ratio: <2-thread throughput / 1-thread>``.
 BLAS threads are pinned to 1.
 
