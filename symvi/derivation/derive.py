@@ -33,7 +33,8 @@ from ..discretisation.discretise import DiscreteModel
 from ..errors import ModelError
 from ..groupoids.analytic import used_coefficients
 from ..declaration.rank import generic_rank
-from .differentiate import gradient, gradient_and_hessian, jacobian
+from .differentiate import (_UNTRANSLATABLE, _Translation, gradient, gradient_and_hessian,
+                            gradient_in_sympy, jacobian)
 
 
 @dataclass(frozen=True)
@@ -196,7 +197,19 @@ class _Engine:
         self.dm = dm
         augmented = dm.lagrangian + sum(
             l * c for l, c in zip(dm.window_multipliers, dm.window_constraints))
-        self.gradients = tuple(gradient(augmented, x + f) for x, f in dm.slots)
+        # kept in SymEngine: each variation substitutes a window's symbols into them there
+        # (SymPy's xreplace of the 20-link chain's gradients took 3 s). In SymPy where
+        # SymEngine cannot take the Lagrangian, or where it holds analytic coefficients
+        # c(s): their stand-ins do not see a substitution into s.
+        self.translation = _Translation()
+        try:
+            self.gradients = tuple(gradient(augmented, x + f, self.translation)
+                                   for x, f in dm.slots)
+        except _UNTRANSLATABLE:
+            self.translation = None
+        if self.translation is None or self.translation.applications:
+            self.translation = None
+            self.gradients = tuple(gradient_in_sympy(augmented, x + f) for x, f in dm.slots)
 
     def _window_mapping(self, st: _Stencil, w: int) -> dict:
         own = self.dm.window_multipliers
@@ -209,16 +222,22 @@ class _Engine:
 
     def variation(self, st: _Stencil, node: int, windows) -> sp.Matrix:
         """Σ over ``windows`` of d/dε of L_d(window) when node ν_node is varied."""
-        g, r = self.dm.groupoid, self.dm.order
-        total = sp.zeros(g.fibre_dim, 1)
+        g, r, t = self.dm.groupoid, self.dm.order, self.translation
+        engine = (lambda M: M) if t is None else t.engine
+        total = None
         for w in windows:
             mapping = self._window_mapping(st, w)
+            if t is not None:
+                mapping = {t.stand_in(k): engine(sp.Matrix([v]))[0] for k, v in mapping.items()}
             for element, side in ((node - 1, g.right), (node, g.left)):
                 slot = element - w
                 if 0 <= slot < r:
                     grad = self.gradients[slot].xreplace(mapping)
-                    total += side(st.xs[element], st.fs[element], self.dm.step).T * grad
-        return total
+                    term = engine(side(st.xs[element], st.fs[element], self.dm.step).T) * grad
+                    total = term if total is None else total + term
+        if total is None:
+            return sp.zeros(g.fibre_dim, 1)
+        return total if t is None else t.sympy(total)
 
     def element_variation(self, st: _Stencil, node: int, element: int,
                           F: sp.Expr) -> sp.Matrix:

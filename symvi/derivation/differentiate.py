@@ -116,8 +116,16 @@ def jacobian(F: sp.Matrix, z: Sequence[sp.Symbol],
         return _sympy_jacobian(F, z, chain)
 
 
-def gradient(f: sp.Expr, z: Sequence[sp.Symbol]) -> sp.Matrix:
-    """The column ∂f/∂z of a scalar f."""
+def gradient(f: sp.Expr, z: Sequence[sp.Symbol], translation: "_Translation"):
+    """The column ∂f/∂z of a scalar f as a SymEngine matrix in the stand-ins of
+    ``translation`` (to be worked with there, and brought back by its ``sympy``)."""
+    return translation.jacobian(translation.engine(sp.Matrix([f])),
+                                [translation.stand_in(s) for s in z]).T
+
+
+def gradient_in_sympy(f: sp.Expr, z: Sequence[sp.Symbol]) -> sp.Matrix:
+    """The column ∂f/∂z of a scalar f, differentiated in SymEngine and brought back to
+    SymPy (SymPy's own ``diff`` where SymEngine cannot take f)."""
     return jacobian(sp.Matrix([f]), z).T
 
 
