@@ -7,9 +7,12 @@ arguments).
 from __future__ import annotations
 
 import argparse
+import contextlib
+import cProfile
 import importlib
 import importlib.util
 import math
+import pstats
 import shutil
 import sys
 import textwrap
@@ -38,14 +41,28 @@ def _compile(args) -> int:
     model = load(args.model)
     _warn_if_shadowed(args.model, model.name)
     start = time.perf_counter()
-    with warnings.catch_warnings():
+    profiler = cProfile.Profile() if args.profile else contextlib.nullcontext()
+    with warnings.catch_warnings(), profiler:
         warnings.showwarning = _show_warning
         compile_model(model, args.output, force=args.force, verbose=args.verbose,
-                      timeout=args.timeout, progress=_to_stderr)
+                      timeout=args.timeout, progress=None if args.quiet else _to_stderr)
     target = Path(args.output) / model.name
     print(f"{model.name}: {target} ready in {time.perf_counter() - start:.2f} s "
           f"(import {model.name} with {args.output} on sys.path)")
+    if args.profile:
+        _print_profile(profiler)
     return 0
+
+
+def _print_profile(profiler: cProfile.Profile) -> None:
+    """``symvi compile --profile``: where the build's time went, on stderr — symvi's own
+    functions by cumulative time (the stages and what they call), then the functions
+    that spent the most time themselves (SymPy's, SymEngine's, the wait for the C
+    compiler)."""
+    stats = pstats.Stats(profiler, stream=sys.stderr)
+    stats.sort_stats("cumulative").print_stats(r"symvi[/\\](derivation|codegen|discretisation|"
+                                               r"declaration|build)", 20)
+    stats.sort_stats("tottime").print_stats(12)
 
 
 def _run(args) -> int:
@@ -292,6 +309,10 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument("--timeout", type=_seconds, default=None, metavar="SECONDS",
                    help="give up (exit 1) if the build takes longer, naming the stage "
                         "that was running")
+    c.add_argument("--quiet", action="store_true", help="no progress lines (a stage that "
+                                                       "runs over 2 s is announced otherwise)")
+    c.add_argument("--profile", action="store_true", help="print where the time went: the "
+                                                         "build's functions by time, on stderr")
     c.set_defaults(func=_compile)
     r = sub.add_parser("run", help="compile MODEL and run its example (integrate, or "
                                    "solve the whole trajectory of an optimal-control problem)",
