@@ -163,29 +163,28 @@ def _outputs(result, model, module, args) -> None:
 def _sweep(args) -> int:
     """``symvi sweep``: the example once per value of one swept parameter or step."""
     from .build import compile_model
-    from .sweep import geometric, parse_range, run_sweep
+    from .sweep import run_sweep
     model = load(args.model)
     ex = model.example
     if ex is None:
         raise ModelError(f"model {model.name!r} declares no example run")
     swept = [item for item in args.param or () if ":" in item.partition("=")[2]]
-    h_values = parse_range(args.h, "--h") if args.h is not None else None
+    h_values = _range(args.h, "--h") if args.h is not None else None
     if len(swept) + (h_values is not None) != 1:
         raise ValueError("sweep one quantity: give exactly one --param NAME=start:stop:count "
                          "or --h start:stop:count (the other --param values are fixed)")
     params = _parameters([item for item in args.param or () if item not in swept], model)
     if swept:
         name, _, text = swept[0].partition("=")
-        name = name.strip()
-        _parameters([f"{name}=0"], model)          # the name is checked like a fixed one
-        values = parse_range(text, f"--param {name}")
+        name = _parameter_name(name, model)
+        values = _range(text, f"--param {name}")
     else:
         name, values = "h", h_values
     if name == "h" and ex.whole_trajectory:
         raise ValueError("an optimal-control sweep varies a parameter; the step of a whole "
                          "trajectory follows from --steps and its horizon")
     if args.spacing == "log":
-        values = geometric(values, f"--{'param ' + name if swept else 'h'}")
+        values = _geometric(values, f"--{'param ' + name if swept else 'h'}")
     if args.plot:
         _check_plot_support()
     steps = args.steps if args.steps is not None else ex.n_steps
@@ -219,21 +218,50 @@ def _sweep(args) -> int:
 def _parameters(given: list[str] | None, model) -> dict[str, float]:
     """``--param NAME=VALUE`` (repeated) as a mapping, each name a parameter of ``model``
     and each value a finite number."""
-    known = [str(k) for k, _ in model.parameters]
     out = {}
     for item in given or ():
         name, sep, text = item.partition("=")
-        name = name.strip()
-        if not sep or not name:
+        if not sep or not name.strip():
             raise ValueError(f"--param expects NAME=VALUE, got {item!r}")
-        if name not in known:
-            raise ValueError(f"--param {name}: model {model.name!r} has no parameter "
-                             f"{name!r}; its parameters: {known or 'none'}")
-        value = _number(text)
-        if not math.isfinite(value):
-            raise ValueError(f"--param {name}: expected a finite number, got {text!r}")
-        out[name] = value
+        name = _parameter_name(name, model)
+        out[name] = _finite(text, f"--param {name}")
     return out
+
+
+def _parameter_name(name: str, model) -> str:
+    """``name`` (stripped), which must be a parameter of ``model``."""
+    name, known = name.strip(), [str(k) for k, _ in model.parameters]
+    if name not in known:
+        raise ValueError(f"--param {name}: model {model.name!r} has no parameter "
+                         f"{name!r}; its parameters: {known or 'none'}")
+    return name
+
+
+def _range(text: str, what: str) -> np.ndarray | None:
+    """``start:stop:count`` as ``count`` values from start to stop (linear spacing), or
+    None when ``text`` is one value (no colon)."""
+    if ":" not in text:
+        return None
+    parts = text.split(":")
+    if len(parts) != 3:
+        raise ValueError(f"{what}: expected start:stop:count, got {text!r}")
+    start, stop = (_finite(part, what) for part in parts[:2])
+    try:
+        count = int(parts[2])
+    except ValueError:
+        count = 0
+    if count < 2:
+        raise ValueError(f"{what}: the count of start:stop:count must be an integer ≥ 2, "
+                         f"got {parts[2]!r}")
+    return np.linspace(start, stop, count)
+
+
+def _geometric(values: np.ndarray, what: str) -> np.ndarray:
+    """The same count of values from the first to the last, geometrically spaced."""
+    if not (values[0] > 0 and values[-1] > 0):
+        raise ValueError(f"{what}: a logarithmic spacing needs positive end points, got "
+                         f"{values[0]:g} and {values[-1]:g}")
+    return np.geomspace(values[0], values[-1], len(values))
 
 
 def _check_plot_support() -> None:
@@ -285,6 +313,14 @@ def _number(text: str) -> float:
         return float(text)
     except ValueError:
         return math.nan
+
+
+def _finite(text: str, what: str) -> float:
+    """``text`` as a finite number, else a ValueError naming ``what``."""
+    value = _number(text)
+    if not math.isfinite(value):
+        raise ValueError(f"{what}: expected a finite number, got {text!r}")
+    return value
 
 
 def _seconds(text: str) -> float:

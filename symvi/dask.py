@@ -40,8 +40,8 @@ def integrate_many(client, package: ModuleType, initial, n_steps: int, h,
     (``workers=``: threads per task, default 1 — a Dask worker runs as many tasks at
     once as it has threads). ``progress``: a bar of finished trajectories here, as in
     the local call. Returns the :class:`BatchResult` the local call returns."""
-    B = batch_items(initial)[1]
-    parts = _chunks(initial, h, params, chunk)
+    item, B = batch_items(initial)
+    parts = _chunks(item, B, h, params, chunk)
     options = {"workers": 1} | options | {"progress": False}
     futures = [client.submit(_run_fields, _folder(package), "integrate_many",
                              (_plain(start), n_steps, step),
@@ -139,9 +139,9 @@ def _folder(package: ModuleType) -> str:
     return str(Path(package.__file__).resolve().parent)
 
 
-def _chunks(initial, h, params, chunk: int):
-    """(initial data, h, params, (first, last)) of each chunk of the batch."""
-    item, B = batch_items(initial)
+def _chunks(item, B: int, h, params, chunk: int):
+    """(initial data, h, params, (first, last)) of each chunk of the batch of B members
+    ``item(b)``."""
     for a in range(0, B, chunk):
         rows = range(a, min(a + chunk, B))
         yield _gather(item, rows), _rows(h, rows, B), _rows_of(params, rows, B), (a, rows[-1])

@@ -23,12 +23,7 @@ def plot_result(result: Any, model: Any, info: dict, file: str | os.PathLike) ->
     ``model`` (a :class:`symvi.Model`, for the coordinates' names) compiled with metadata
     ``info`` (the generated package's ``INFO``) to the image ``file`` (its format from the
     suffix, e.g. ``.png``)."""
-    try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        raise ValueError(MISSING) from None
+    plt = _pyplot()
     names = [str(s) for s in model.groupoid.continuous_symbols(1)]
     n = info["fibre_dim"]
     fig, axes = plt.subplots(3, 1, figsize=(8, 8), sharex=True, constrained_layout=True)
@@ -39,6 +34,17 @@ def plot_result(result: Any, model: Any, info: dict, file: str | os.PathLike) ->
     fig.suptitle(f"{info['name']}: {result.status.name}")
     fig.savefig(os.fspath(file), dpi=100)
     plt.close(fig)
+
+
+def _pyplot():
+    """matplotlib's pyplot on the file-only Agg backend; :data:`MISSING` without it."""
+    try:
+        import matplotlib
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError:
+        raise ValueError(MISSING) from None
+    return plt
 
 
 def _configuration(ax, result, info: dict, names: Sequence[str]) -> None:
@@ -96,12 +102,7 @@ def plot_sweep(sweep: Any, title: str, file: str | os.PathLike, log_x: bool = Fa
     judges each member (the energy error, a drift, the Newton iterations or the cost)
     against the swept values, on a logarithmic axis where it spans decades; members that
     failed marked with a cross at the bottom of the axes."""
-    try:
-        import matplotlib
-        matplotlib.use("Agg")
-        import matplotlib.pyplot as plt
-    except ImportError:
-        raise ValueError(MISSING) from None
+    plt = _pyplot()
     ok = sweep.succeeded
     fig, ax = plt.subplots(figsize=(7, 4.5), constrained_layout=True)
     ax.plot(sweep.values[ok], sweep.measure[ok], "o-", ms=4, label="succeeded")

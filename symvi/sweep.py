@@ -11,7 +11,6 @@ against the swept values.
 """
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
 from typing import Any, Sequence
 
@@ -86,33 +85,6 @@ class Sweep:
         if slope is not None:
             lines.append(f"order      {self.measure_name} ∝ h^{slope:.2f} (least-squares fit)")
         return lines
-
-
-def parse_range(text: str, what: str) -> np.ndarray | None:
-    """``start:stop:count`` as ``count`` values from start to stop (linear spacing), or
-    None when ``text`` is one value (no colon)."""
-    if ":" not in text:
-        return None
-    parts = text.split(":")
-    if len(parts) != 3:
-        raise ValueError(f"{what}: expected start:stop:count, got {text!r}")
-    start, stop = (_finite(p, what) for p in parts[:2])
-    try:
-        count = int(parts[2])
-    except ValueError:
-        count = 0
-    if count < 2:
-        raise ValueError(f"{what}: the count of start:stop:count must be an integer ≥ 2, "
-                         f"got {parts[2]!r}")
-    return np.linspace(start, stop, count)
-
-
-def geometric(values: np.ndarray, what: str) -> np.ndarray:
-    """The same count of values from the first to the last, geometrically spaced."""
-    if not (values[0] > 0 and values[-1] > 0):
-        raise ValueError(f"{what}: a logarithmic spacing needs positive end points, got "
-                         f"{values[0]:g} and {values[-1]:g}")
-    return np.geomspace(values[0], values[-1], len(values))
 
 
 def run_sweep(module, example, name: str, values: np.ndarray, *, steps: int, h: float,
@@ -200,13 +172,3 @@ def _messages(batch: BatchResult | BVPBatch) -> Sequence[str]:
 def _short(name: str) -> str:
     return {"max |E − E₀|": "energy", "max |F − F₀|": "drift", "cost": "cost"}.get(
         name, "newton")
-
-
-def _finite(text: str, what: str) -> float:
-    try:
-        value = float(text)
-    except ValueError:
-        value = math.nan
-    if not math.isfinite(value):
-        raise ValueError(f"{what}: expected a finite number, got {text!r}")
-    return value
