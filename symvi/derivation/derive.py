@@ -33,8 +33,7 @@ from ..discretisation.discretise import DiscreteModel
 from ..errors import ModelError
 from ..groupoids.analytic import used_coefficients
 from ..declaration.rank import generic_rank
-from .differentiate import (_UNTRANSLATABLE, _Translation, gradient, gradient_and_hessian,
-                            gradient_in_sympy, jacobian)
+from .differentiate import _UNTRANSLATABLE, _Translation, gradient, gradient_and_hessian, jacobian
 
 
 @dataclass(frozen=True)
@@ -201,15 +200,16 @@ class _Engine:
         # (SymPy's xreplace of the 20-link chain's gradients took 3 s). In SymPy where
         # SymEngine cannot take the Lagrangian, or where it holds analytic coefficients
         # c(s): their stand-ins do not see a substitution into s.
-        self.translation = _Translation()
+        t = _Translation()
         try:
-            self.gradients = tuple(gradient(augmented, x + f, self.translation)
-                                   for x, f in dm.slots)
+            gradients = tuple(gradient(augmented, x + f, t) for x, f in dm.slots)
         except _UNTRANSLATABLE:
-            self.translation = None
-        if self.translation is None or self.translation.applications:
-            self.translation = None
-            self.gradients = tuple(gradient_in_sympy(augmented, x + f) for x, f in dm.slots)
+            t, gradients = None, tuple(sp.Matrix([sp.diff(augmented, s) for s in x + f])
+                                       for x, f in dm.slots)
+        if t is not None and t.applications:
+            gradients = tuple(t.sympy(G) for G in gradients)
+            t = None
+        self.translation, self.gradients = t, gradients
 
     def _window_mapping(self, st: _Stencil, w: int) -> dict:
         own = self.dm.window_multipliers
@@ -228,7 +228,8 @@ class _Engine:
         for w in windows:
             mapping = self._window_mapping(st, w)
             if t is not None:
-                mapping = {t.stand_in(k): engine(sp.Matrix([v]))[0] for k, v in mapping.items()}
+                mapping = dict(zip((t.stand_in(k) for k in mapping),
+                                   engine(sp.Matrix(list(mapping.values())))))
             for element, side in ((node - 1, g.right), (node, g.left)):
                 slot = element - w
                 if 0 <= slot < r:

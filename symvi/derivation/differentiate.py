@@ -123,12 +123,6 @@ def gradient(f: sp.Expr, z: Sequence[sp.Symbol], translation: "_Translation"):
                                 [translation.stand_in(s) for s in z]).T
 
 
-def gradient_in_sympy(f: sp.Expr, z: Sequence[sp.Symbol]) -> sp.Matrix:
-    """The column ∂f/∂z of a scalar f, differentiated in SymEngine and brought back to
-    SymPy (SymPy's own ``diff`` where SymEngine cannot take f)."""
-    return jacobian(sp.Matrix([f]), z).T
-
-
 def gradient_and_hessian(f: sp.Expr, z: Sequence[sp.Symbol]) -> tuple[sp.Matrix, sp.Matrix]:
     """The row ∂f/∂z and the matrix ∂²f/∂z² of a scalar f."""
     try:
