@@ -16,7 +16,7 @@ from typing import Mapping
 
 import numpy as np
 
-from . import arguments
+from . import arguments, boundary_states
 from .assembly import Problem
 from .band import cholesky_pivot, product
 from .barrier import check_boundary_data
@@ -42,7 +42,12 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
 
     Parameters
     ----------
-    start, end : the fixed nodes 0 … r−1 and N−r+1 … N (r the order). Pair groupoid:
+    start, end : :class:`State` s at t = 0 and t = T (second-order problems on a pair
+        groupoid or matrix Lie groups): ``State(x=q, v=q̇)``, ``State(g=g, v=ξ)``. Each
+        fixes the element whose midpoint it is; the states are then on the grid t_k = k·h,
+        k = 0 … N, the nodes at the half steps, and the cost and path converge at order 2
+        on [0, T] (:mod:`.boundary_states`); ``res.states`` holds the solved ones.
+        Or the fixed nodes 0 … r−1 and N−r+1 … N (r the order). Pair groupoid:
         (r, n) arrays of nodes q. Matrix Lie group: (r, d, d) configurations. Groupoids
         with both (action groupoids, products): ``(x, g)``, base points (r, m) and
         configurations (r, d, d) — a tuple of such arrays with several group factors.
@@ -50,7 +55,8 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
         conditions (``optimal_control(..., end="free" or ψ)``) the last r nodes are
         unknowns and ``end`` their first guess, or None: a previous result's ``guess``
         last nodes, else the start's last node held; ``res.end_multipliers`` holds ν.
-    n_steps : N, the number of elements: N + 1 nodes t_k = k·h, k = 0 … N, on [0, T].
+    n_steps : N, the number of elements: N + 1 nodes t_k = k·h, k = 0 … N, on [0, T]
+        (from States: N + 1 states t_k = k·h on [0, T], N + 1 elements, N + 2 nodes).
     h, T : the step h, or the horizon T = N·h (keyword; give one of them). With a free
         horizon (``optimal_control(..., time_cost=ρ)``) the first guess of it, the
         result's ``T`` (``t[-1]``) the optimal horizon (:mod:`.horizon`).
@@ -98,14 +104,24 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
         raise ValueError(f"model {model.name!r}: no whole-trajectory solve on kind "
                          f"{info['kind']!r}")
     r = model.order
-    N = arguments.count(n_steps, "n_steps", 2 * r, why=(
+    from_states = boundary_states.given(start, end)
+    if from_states:
+        boundary_states.check_supported(model)
+    N = arguments.count(n_steps, "n_steps", 2 * r - from_states, why=(
+        " (States fix the first and last elements, and one free node lies between them)"
+        if from_states else
         f" ({r} fixed node{'s' if r > 1 else ''} at each end of an order-{r} problem and at "
         f"least one free node between them)"))
     h, p = arguments.step_of(h, T, N), model.params(params)
     xtol, ftol = arguments.tolerance(xtol, "xtol"), arguments.tolerance(ftol, "ftol")
     maxiter = arguments.iterations(maxiter)
-    check_memory(model, N)
-    if info.get("free_horizon"):
+    check_memory(model, N + from_states)
+    if from_states:
+        nodes = (boundary_states.element_nodes(model, start, h, "start"),
+                 boundary_states.element_nodes(model, end, h, "end"))
+        result = boundary_states.attach(model, _fixed_horizon(
+            model, *nodes, N + 1, h, p, guess, maxiter, xtol, ftol), h)
+    elif info.get("free_horizon"):
         result = free_horizon(
             lambda step, previous: _fixed_horizon(model, start, end, N, step, p, (
                 guess if previous is None else previous), maxiter, xtol, ftol),

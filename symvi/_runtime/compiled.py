@@ -229,7 +229,7 @@ class CompiledModel:
     def state_parts(self, state: State) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """The position x, velocity v and flat configuration g₀ of ``state``, checked."""
         x, v = state_arrays(self, state)
-        g0 = self._initial_configuration([] if state.g is None else [state.g])
+        g0 = self.configuration(state.g, "the state's configuration g")
         if self.matrix_dims:
             check_configurations(self, g0[None, :], "the state's configuration g")
         return x, v, g0
@@ -265,21 +265,22 @@ class CompiledModel:
                                         f"initial increments (the first {K - 1} fibre parts)")
         x0 = arguments.finite_array(x0, (self.m,), "initial base point x_0")
         check_base_points(self, x0[None, :], "initial base point x_0")
-        g0 = self._initial_configuration(parts)
+        g0 = self.configuration(parts[0] if parts else None)
         if self.matrix_dims:
             check_configurations(self, g0[None, :], "initial configuration g_0")
         return np.concatenate([x0, fibres.reshape(-1)]), g0
 
-    def _initial_configuration(self, parts) -> np.ndarray:
+    def configuration(self, given=None, what: str = "initial configuration g_0") -> np.ndarray:
+        """One node's configurations, flattened factor by factor (Σ d² numbers): ``given``
+        is a (d, d) matrix, or a sequence of them with several group factors; None is the
+        identity. The shapes and finiteness are checked here, the group by the caller."""
         dims = self.matrix_dims
         if not dims:
             return np.zeros(1)
-        if not parts:
+        if given is None:
             return np.concatenate([np.eye(d).reshape(-1) for d in dims])
-        given = parts[0]
         blocks = [given] if len(dims) == 1 else list(given)
         if len(blocks) != len(dims):
-            raise ValueError(f"g_0 needs {len(dims)} matrices, one per group factor")
-        return np.concatenate([
-            arguments.finite_array(b, (d, d), "initial configuration g_0").reshape(-1)
-            for b, d in zip(blocks, dims)])
+            raise ValueError(f"{what} needs {len(dims)} matrices, one per group factor")
+        return np.concatenate([arguments.finite_array(b, (d, d), what).reshape(-1)
+                               for b, d in zip(blocks, dims)])

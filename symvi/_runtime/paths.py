@@ -34,7 +34,7 @@ class Path:
                        lam=self.lam.copy(), nu=self.nu.copy())
 
 
-def _configurations(model, value, count: int, what: str) -> np.ndarray:
+def flat_configurations(model, value, count: int, what: str) -> np.ndarray:
     """(count, Σ d²) from one (count, d, d) array per group factor."""
     dims = model.matrix_dims
     blocks = [value] if len(dims) == 1 else list(value)
@@ -59,14 +59,15 @@ def _parse_nodes(model, value, count: int, what: str) -> tuple[np.ndarray, np.nd
     if not dims:
         return arguments.finite_array(value, (count, m), f"{what} nodes"), np.zeros((count, 0))
     if m == 0:
-        return np.zeros((count, 0)), _configurations(model, value, count, f"{what} configurations")
+        return np.zeros((count, 0)), flat_configurations(model, value, count,
+                                                         f"{what} configurations")
     try:
         x, g = value
     except (TypeError, ValueError):
         raise ValueError(f"{what} must be (x, g): base points ({count}, {m}) and "
                          f"configurations ({count}, d, d)") from None
     return (arguments.finite_array(x, (count, m), f"{what} base points"),
-            _configurations(model, g, count, f"{what} configurations"))
+            flat_configurations(model, g, count, f"{what} configurations"))
 
 
 def _failure(message: str, status: Status) -> BVPResult:
@@ -174,7 +175,7 @@ def _last_nodes(model, previous: BVPResult, r: int) -> tuple[np.ndarray, np.ndar
     """The last r nodes (x, g) of a previous result."""
     count = previous.t.size
     x = previous.x[-r:] if previous.x is not None else np.zeros((r, 0))
-    g = _configurations(model, previous.g, count, "guess configurations")[-r:] \
+    g = flat_configurations(model, previous.g, count, "guess configurations")[-r:] \
         if model.matrix_dims else np.zeros((r, 0))
     return np.array(x, dtype=float), g
 
@@ -207,14 +208,14 @@ def _kept(model, previous: BVPResult, x, g, f, lam, h: float):
     :func:`.bounded.bounded`)."""
     count = x.shape[0]
     old_x = previous.x if previous.x is not None else np.zeros((count, 0))
-    old_g = _configurations(model, previous.g, count, "guess configurations") \
+    old_g = flat_configurations(model, previous.g, count, "guess configurations") \
         if model.matrix_dims else np.zeros((count, 0))
     same = (x == old_x).all(axis=1) & (g == old_g).all(axis=1)
     if previous.f.shape == f.shape:
         keep = same[:-1] & same[1:]
         old = np.array(previous.f, dtype=float)
         scaled = model.step_scaled
-        step = float(previous.t[1]) if previous.t.size > 1 else h
+        step = float(previous.t[1] - previous.t[0]) if previous.t.size > 1 else h
         if step != h:
             old[:, scaled] *= step / h
         # only fibres that are the elements of the new nodes (to far more than the

@@ -106,7 +106,12 @@ class State:
     sequence of them with several group factors; the identity by default). The first
     element is the one whose discrete momentum F⁻L_d equals the continuous one ∂L/∂v at
     the state (the discrete Legendre transform), so that the path approximates the
-    solution from that state at the method's order, whatever the step."""
+    solution from that state at the method's order, whatever the step.
+
+    Also the boundary data of a second-order :func:`solve_bvp` at t = 0 and t = T (pair
+    groupoid, matrix Lie groups): each fixes the element whose midpoint it is
+    (:mod:`.boundary_states`). A solve's ``states`` is a State of arrays, one row per
+    time."""
 
     v: object
     x: object = None
@@ -147,6 +152,8 @@ class _Result:
                 continue
             if isinstance(value, Status):
                 arrays[field.name] = np.array(value.name)
+            elif isinstance(value, State):
+                arrays.update(_state_arrays(field.name, value))
             elif isinstance(value, dict):
                 arrays.update({f"{field.name}_{k}": np.asarray(v) for k, v in value.items()})
             elif isinstance(value, tuple) and value and isinstance(value[0], np.ndarray):
@@ -233,7 +240,8 @@ class BVPResult(_Result):
         −c), else None.
     inequalities : the names of the inequalities, e.g. ``"tau1 <= tau_max"``.
     active_set : per window, the names of its active inequalities (a property).
-    T : the horizon t[-1] (a property): the optimal one with a free final time.
+    T : the horizon (a property): t[-1], or t_states[-1] from States; the optimal one
+        with a free final time.
     end_multipliers : (P,) multipliers ν of the end conditions ψ = 0 (``end=`` of
         :func:`symvi.optimal_control`), else None.
     history : per interior-point iteration, arrays ``mu`` (barrier parameter per unit
@@ -241,10 +249,17 @@ class BVPResult(_Result):
         ``alpha`` (step length; 0 where μ fell), like IPOPT's log; else None.
     cost : Σ_k L_d over the windows — the discrete cost J_d of an optimal-control problem,
         the action sum otherwise. A window of a second-order problem spans nodes k … k+2
-        and weighs its integrand by h at node k+1, so J_d is a midpoint sum over
-        [h/2, T − h/2]: it differs from ∫₀ᵀ by the two end half-windows, O(h) where the
-        integrand does not vanish at the ends (a rest-to-rest slew starts and ends with
-        its largest torques).
+        and weighs its integrand by h at node k+1. From States (``solve_bvp(model,
+        State(...), State(...), ...)``) the windows are centred at (k + ½)h and J_d is
+        the midpoint rule on [0, T]: it converges at order 2 (:mod:`.boundary_states`).
+        From nodes it is a midpoint sum over [h/2, T − h/2]: it differs from ∫₀ᵀ by the
+        two end half-windows, O(h) where the integrand does not vanish at the ends (a
+        rest-to-rest slew starts and ends with its largest torques).
+    states : from States, the states at the times ``t_states`` = k·h on [0, T] (the
+        elements' midpoints): a :class:`State` whose ``v`` is (N+1, n), ``x`` (N+1, m) on
+        a pair groupoid and ``g`` (N+1, d, d) on Lie groups; else None.
+    t_states : (N+1,) the times k·h of ``states``, else None. From States the nodes sit
+        at the half steps: ``t`` = (k − ½)h, k = 0 … N+1.
     iterations : Newton iterations taken.
     residual_norms : max-norm of the residual before each iteration and at the end.
     step_norms : max-norm of each Newton update actually taken (after line search).
@@ -269,10 +284,14 @@ class BVPResult(_Result):
     inequalities: tuple[str, ...] = ()
     history: dict | None = None
     end_multipliers: np.ndarray | None = None
+    states: State | None = None
+    t_states: np.ndarray | None = None
 
     @property
     def T(self) -> float:
         """The horizon N·h: with a free final time (``time_cost``), the optimal one."""
+        if self.t_states is not None:
+            return float(self.t_states[-1])
         return float(self.t[-1]) if len(self.t) else 0.0
 
     @property
@@ -467,6 +486,19 @@ class BVPBatch(_Result):
 
     def __repr__(self) -> str:
         return f"<BVPBatch {self.status.name}: {self.message[:100]!r}; {len(self)} solves>"
+
+
+def _state_arrays(name: str, state: State) -> dict:
+    """A State of arrays as archive entries ``states_v``, ``states_x``, ``states_g`` (or
+    ``states_g_0``, … with several group factors)."""
+    arrays = {}
+    for part in ("v", "x", "g"):
+        value = getattr(state, part)
+        if isinstance(value, tuple):
+            arrays.update({f"{name}_{part}_{i}": v for i, v in enumerate(value)})
+        elif value is not None:
+            arrays[f"{name}_{part}"] = np.asarray(value)
+    return arrays
 
 
 def write_npz(file: str | os.PathLike, arrays: dict) -> None:

@@ -33,9 +33,9 @@ class Example:
     then starts from it through the discrete Legendre transform, so that ``--h`` changes
     the step and not the motion (fixed nodes fix the velocity (q₁ − q₀)/h, which changes
     with h); ``initial`` is then the node form of about the same start at the step ``h``.
-    A whole-trajectory example (optimal control) gives the fixed nodes ``start`` and
-    ``end`` of ``solve_bvp`` instead (``end`` None with end conditions), with ``n_steps`` =
-    N.
+    A whole-trajectory example (optimal control) gives the boundary data ``start`` and
+    ``end`` of ``solve_bvp`` instead — :class:`symvi.State` s at t = 0 and t = N·h, or the
+    fixed nodes (``end`` None with end conditions) — with ``n_steps`` = N.
     """
 
     initial: Any = None
