@@ -84,7 +84,7 @@ def assembled(module, name: str, N: int, result, lifted: bool | None = None):
     model, ex = module.model, get(name).example
     h = ex.h * ex.n_steps / N
     paths, nodes = runtime(module, "paths"), N + 1
-    g = paths._configurations(model, result.g, nodes, "g") if model.matrix_dims \
+    g = paths.flat_configurations(model, result.g, nodes, "g") if model.matrix_dims \
         else np.zeros((nodes, 0))
     x = np.zeros((nodes, 0)) if result.x is None else result.x
     lam = np.zeros((0, 0)) if result.multipliers is None else result.multipliers
