@@ -24,6 +24,7 @@ import numpy as np
 
 from .version import __version__
 from .errors import BuildError, ModelError
+from .checks.budget import DEFAULT_BUDGET
 from .models import BUNDLED, load
 
 
@@ -273,12 +274,31 @@ def _check_plot_support() -> None:
 
 def _check(args) -> int:
     from .checks import check
+    from .checks.runner import CHECKS
     from .models import load_with_equations
     only = [n.strip() for n in args.only.split(",") if n.strip()] if args.only else None
     model, equations = load_with_equations(args.model)
-    report = check(model, only=only, equations=equations)
-    print(report.to_json() if args.json else report.format())
+    if args.json:
+        report = check(model, only=only, equations=equations, budget=args.budget,
+                       progress=_stderr)
+        print(report.to_json())
+        return report.exit_code
+    width = max(map(len, only or CHECKS))
+    print(f"symvi check {model.name}", flush=True)
+    report = check(model, only=only, equations=equations, budget=args.budget,
+                   on_result=lambda r: print("\n".join(r.lines(width)), flush=True),
+                   progress=_stderr)
+    print("\n".join(report.closing()))
     return report.exit_code
+
+
+def _stderr(line: str) -> None:
+    print(line, file=sys.stderr, flush=True)
+
+
+def _budget(text: str) -> float | None:
+    """``--budget``'s value: positive seconds, or 'none' for no limit."""
+    return None if text.strip().lower() == "none" else _seconds(text)
 
 
 def _list(args) -> int:
@@ -383,6 +403,10 @@ def parser() -> argparse.ArgumentParser:
     k.add_argument("--only", default=None, help="comma-separated checks to run (default: "
                                                 "all)")
     k.add_argument("--json", action="store_true", help="print the report as JSON")
+    k.add_argument("--budget", type=_budget, default=DEFAULT_BUDGET, metavar="SECONDS",
+                   help=f"each check's time budget (default {DEFAULT_BUDGET:g}; 'none': "
+                        f"unlimited): past it the costly optional parts (the singular "
+                        f"locus) are skipped with a note, never a verdict")
     k.set_defaults(func=_check)
     ls = sub.add_parser("list", help="list the bundled models")
     ls.set_defaults(func=_list)

@@ -1,33 +1,25 @@
 """Stage timing of a build: progress lines, and a deadline (``compile_model(timeout=)``).
 
 The symbolic stages (discretise, derive, emit) run in this process and are interrupted
-by ``SIGALRM`` (``setitimer``), which Python only allows in the main thread: called from
-another thread, a stage that overruns the deadline runs to its end and the build gives
-up then. The C compile runs in a subprocess that is killed at the deadline wherever
-the build was called from.
+at the deadline by :func:`symvi.timing.interrupted_after` (``SIGALRM``, which Python only
+allows in the main thread): called from another thread, a stage that overruns the
+deadline runs to its end and the build gives up then. The C compile runs in a subprocess
+that is killed at the deadline wherever the build was called from.
 """
 from __future__ import annotations
 
 import contextlib
-import signal
-import threading
 import time
 from typing import Callable, Iterator
 
 from ..errors import BuildError
+from ..timing import Expired, announced, interrupted_after
 
 #: A stage that runs longer than this (seconds) is announced while it runs.
 SLOW_STAGE = 2.0
-#: Once the deadline has passed, SIGALRM is repeated this often (seconds), in case code
-#: of the stage catches the first interruption and carries on.
-_REPEAT = 0.1
 
 Progress = Callable[[str], None]
-
-
-class Expired(BaseException):
-    """Raised inside a stage when the deadline passes. A BaseException so that the
-    stage's own ``except Exception`` clauses (SymPy has many) do not swallow it."""
+__all__ = ["Expired", "Progress", "SLOW_STAGE", "StageClock"]
 
 
 class StageClock:
@@ -45,7 +37,6 @@ class StageClock:
         self.start = time.monotonic()
         self.deadline = None if timeout is None else self.start + timeout
         self.finished: list[tuple[str, float]] = []
-        self._armed = False
 
     def remaining(self) -> float | None:
         """Seconds left before the deadline (None: no deadline)."""
@@ -58,8 +49,10 @@ class StageClock:
         began = time.monotonic()
         if self.deadline is not None and began >= self.deadline:
             raise self.expired(label, began)
+        say = None if self.progress is None else self._say
+        remaining = self.remaining() if interruptible else None
         try:
-            with self._announced(label, began), self._alarm(interruptible):
+            with announced(label, say, SLOW_STAGE, self.verbose), interrupted_after(remaining):
                 yield
         except Expired:
             raise self.expired(label, began) from None
@@ -80,54 +73,3 @@ class StageClock:
     def _say(self, line: str) -> None:
         if self.progress is not None:
             self.progress(f"{self.name}: {line}")
-
-    @contextlib.contextmanager
-    def _announced(self, label: str, began: float) -> Iterator[None]:
-        announce = threading.Timer(SLOW_STAGE, self._say,
-                                   [f"{label} is running (over {SLOW_STAGE:g} s so far) ..."])
-        announce.daemon = True
-        if self.progress is not None:
-            announce.start()
-        try:
-            yield
-        finally:
-            announce.cancel()
-            elapsed = time.monotonic() - began
-            if self.verbose or elapsed >= SLOW_STAGE:
-                self._say(f"{label} took {elapsed:.2f} s")
-
-    # -- deadline -------------------------------------------------------------------------
-    @contextlib.contextmanager
-    def _alarm(self, interruptible: bool) -> Iterator[None]:
-        """Raise :class:`Expired` in this thread at the deadline, when possible."""
-        remaining = self.remaining()
-        if (remaining is None or not interruptible
-                or threading.current_thread() is not threading.main_thread()):
-            yield
-            return
-        saved_handler = signal.signal(signal.SIGALRM, self._on_alarm)
-        saved_delay, saved_interval = signal.setitimer(signal.ITIMER_REAL,
-                                                       max(remaining, 1e-3), _REPEAT)
-        armed_at = time.monotonic()
-        self._armed = True
-        try:
-            yield
-        finally:
-            try:
-                self._armed = False
-            finally:   # runs even if the alarm fired just before the line above
-                self._disarm(saved_handler, saved_delay, saved_interval, armed_at)
-
-    @staticmethod
-    def _disarm(saved_handler, saved_delay: float, saved_interval: float,
-                armed_at: float) -> None:
-        signal.setitimer(signal.ITIMER_REAL, 0)
-        signal.signal(signal.SIGALRM, saved_handler if saved_handler is not None
-                      else signal.SIG_DFL)
-        if saved_delay > 0:   # someone else's timer: re-arm it for what is left of it
-            left = saved_delay - (time.monotonic() - armed_at)
-            signal.setitimer(signal.ITIMER_REAL, max(left, 1e-3), saved_interval)
-
-    def _on_alarm(self, signum, frame) -> None:
-        if self._armed:
-            raise Expired()

@@ -17,6 +17,7 @@ import sympy as sp
 from ..derivation.derive import step_jacobian
 from ..errors import ModelError
 from ..declaration.rank import generic_rank, sequential_lambdify
+from .budget import SKIPPED
 from .noether import readable
 from .report import CheckResult
 
@@ -83,8 +84,11 @@ def run(ctx) -> CheckResult:
             NAME, f"the {what} has rank {rank} < {n} at every sample point: L_d does not "
                   f"define a step map (degenerate Lagrangian?)",
             [_null_direction(J, st, fixed, names)], rank=rank, size=n)
-    locus = singular_locus(J, names) if not st.definitions else None
-    if locus is None:
+    locus = ctx.budget.attempt("singular locus", singular_locus, J, names) \
+        if not st.definitions else None
+    if locus is SKIPPED:
+        locus, where = None, ctx.budget.note("singular locus")
+    elif locus is None:
         where = "singular locus not computed (matrix too large)"
     elif not locus:
         where = "its determinant never vanishes"

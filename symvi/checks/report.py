@@ -7,6 +7,8 @@ from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
 PASS, FAIL, SKIP = "pass", "fail", "skip"
+#: The ``data`` key naming the parts of a check skipped for its time budget.
+BUDGET_SKIPPED = "skipped_for_budget"
 
 
 @dataclass(frozen=True)
@@ -37,6 +39,11 @@ class CheckResult:
     @classmethod
     def skipped(cls, name: str, reason: str) -> "CheckResult":
         return cls(name, SKIP, reason)
+
+    def lines(self, width: int = 0) -> list[str]:
+        """The report's line for this check, failure details indented below it."""
+        return [f"  {self.status.upper():4s}  {self.name:{width}s}  {self.summary}"] + \
+            [f"          {line}" for d in self.details for line in d.splitlines()]
 
     @property
     def ok(self) -> bool:
@@ -70,16 +77,25 @@ class CheckReport:
         raise KeyError(f"no check {name!r} in this report; ran {[r.name for r in self.results]}")
 
     def format(self) -> str:
-        """Human-readable: one line per check, failure details indented below it."""
+        """Human-readable: one line per check, failure details indented below it, the
+        counts, and the parts skipped for the time budget."""
         width = max((len(r.name) for r in self.results), default=0)
         lines = [f"symvi check {self.model}"]
         for r in self.results:
-            lines.append(f"  {r.status.upper():4s}  {r.name:{width}s}  {r.summary}")
-            lines += [f"          {line}" for d in r.details for line in d.splitlines()]
+            lines += r.lines(width)
+        return "\n".join(lines + self.closing())
+
+    def closing(self) -> list[str]:
+        """The counts line and, when the budget cut parts of checks, which."""
         counts = {s: sum(r.status == s for r in self.results) for s in (PASS, FAIL, SKIP)}
-        lines.append(f"{len(self.results)} checks: {counts[PASS]} passed, {counts[FAIL]} "
-                     f"failed, {counts[SKIP]} skipped")
-        return "\n".join(lines)
+        lines = [f"{len(self.results)} checks: {counts[PASS]} passed, {counts[FAIL]} "
+                 f"failed, {counts[SKIP]} skipped"]
+        cut = [f"{r.name} ({', '.join(r.data[BUDGET_SKIPPED])})" for r in self.results
+               if r.data.get(BUDGET_SKIPPED)]
+        if cut:
+            lines.append(f"skipped for the time budget: {'; '.join(cut)} (a larger --budget "
+                         f"runs them)")
+        return lines
 
     def to_dict(self) -> dict:
         return {"model": self.model, "passed": self.passed,

@@ -8,14 +8,20 @@ once and caches it.
 from __future__ import annotations
 
 import importlib
+from dataclasses import replace
 from functools import cached_property
-from typing import Sequence
+from typing import Callable, Sequence
 
 from ..derivation.derive import DerivedModel, derive
 from ..discretisation.discretise import DiscreteModel, discretise
 from ..errors import ModelError
 from ..declaration.model import Model
-from .report import CheckReport, CheckResult
+from ..timing import announced
+from .budget import DEFAULT_BUDGET, Budget
+from .report import BUDGET_SKIPPED, CheckReport, CheckResult
+
+#: A check running longer than this (seconds) is announced on ``progress``.
+SLOW_CHECK = 5.0
 
 #: name → what it checks (paper reference), in running order.
 CHECKS: dict[str, str] = {
@@ -47,12 +53,16 @@ class Context:
         Hand-derived equations to compare with symvi's (check ``equations``).
     seed:
         Seed of the random sample points numerical checks use (results are reproducible).
+    budget:
+        The time budget of each check (:class:`.budget.Budget`).
     """
 
-    def __init__(self, model: Model, equations: Sequence = (), seed: int = 20261121):
+    def __init__(self, model: Model, equations: Sequence = (), seed: int = 20261121,
+                 budget: Budget | None = None):
         self.model = model
         self.equations = tuple(equations)
         self.seed = seed
+        self.budget = budget if budget is not None else Budget()
 
     @cached_property
     def discrete(self) -> DiscreteModel:
@@ -70,26 +80,43 @@ class Context:
 
 
 def run_check(name: str, ctx: Context) -> CheckResult:
-    """Run the check called ``name``; a ModelError raised inside it is that check failing."""
+    """Run the check called ``name`` within its time budget; a ModelError raised inside
+    it is that check failing. Parts skipped for the budget are named in its ``data``."""
     if name not in CHECKS:
         raise ValueError(f"no check {name!r}; checks: {', '.join(CHECKS)}")
     module = importlib.import_module(f"{__package__}.{name}")
+    ctx.budget.begin()
     try:
-        return module.run(ctx)
+        result = module.run(ctx)
     except ModelError as exc:
-        return CheckResult.failed(name, f"the model cannot be checked: {exc}")
+        result = CheckResult.failed(name, f"the model cannot be checked: {exc}")
+    if ctx.budget.skipped:
+        result = replace(result, data={**result.data, BUDGET_SKIPPED: tuple(ctx.budget.skipped)})
+    return result
 
 
 def check(model: Model, *, only: Sequence[str] | None = None, equations: Sequence = (),
-          seed: int = 20261121) -> CheckReport:
+          seed: int = 20261121, budget: float | None = DEFAULT_BUDGET,
+          on_result: Callable[[CheckResult], None] | None = None,
+          progress: Callable[[str], None] | None = None) -> CheckReport:
     """Run the derivation checks on ``model`` and return their :class:`CheckReport`.
 
     ``only`` restricts the run to some of :data:`CHECKS`; ``equations`` are hand-derived
     equations for the ``equations`` check (:class:`symvi.checks.equations.HandDerived`).
+    ``budget`` is each check's time in seconds (None: unlimited) past which its optional,
+    costly parts (the singular locus) are skipped with a note, never its verdict.
+    ``on_result`` receives each check's result as it finishes; ``progress`` a line when
+    a check has run for :data:`SLOW_CHECK` seconds and when it ends.
     """
     names = list(CHECKS) if only is None else list(only)
     unknown = [n for n in names if n not in CHECKS]
     if unknown:
         raise ValueError(f"unknown check(s) {unknown}; checks: {', '.join(CHECKS)}")
-    ctx = Context(model, equations, seed)
-    return CheckReport(model.name, tuple(run_check(n, ctx) for n in names))
+    ctx = Context(model, equations, seed, Budget(budget))
+    results = []
+    for name in names:
+        with announced(f"check {name}", progress, SLOW_CHECK):
+            results.append(run_check(name, ctx))
+        if on_result is not None:
+            on_result(results[-1])
+    return CheckReport(model.name, tuple(results))

@@ -1,0 +1,83 @@
+"""Time limits and progress lines for long symbolic work (builds, derivation checks).
+
+SymPy cannot be asked to stop, but pure-Python work can be interrupted: ``SIGALRM``
+(``setitimer``) raises :class:`Expired` in the main thread at the deadline, repeated
+every :data:`REPEAT` seconds in case the code catches the first one. Python allows
+signal handlers in the main thread only; elsewhere the work runs to its end. A caller's
+own timer is re-armed afterwards for what is left of it.
+"""
+from __future__ import annotations
+
+import contextlib
+import signal
+import threading
+import time
+from typing import Callable, Iterator
+
+#: Once the deadline has passed, SIGALRM is repeated this often (seconds).
+REPEAT = 0.1
+
+
+class Expired(BaseException):
+    """Raised inside interrupted work at its deadline. A BaseException so that the work's
+    own ``except Exception`` clauses (SymPy has many) do not swallow it."""
+
+
+def interruptible() -> bool:
+    """Whether :func:`interrupted_after` can interrupt work here (the main thread, Unix)."""
+    return hasattr(signal, "setitimer") and threading.current_thread() is threading.main_thread()
+
+
+@contextlib.contextmanager
+def interrupted_after(seconds: float | None) -> Iterator[None]:
+    """Raise :class:`Expired` in the body once ``seconds`` have passed (None: never), where
+    :func:`interruptible`; elsewhere the body runs to its end."""
+    if seconds is None or not interruptible():
+        yield
+        return
+    armed = [True]
+
+    def on_alarm(signum, frame) -> None:
+        if armed[0]:        # not once the body has ended and the timer is being disarmed
+            raise Expired()
+
+    saved_handler = signal.signal(signal.SIGALRM, on_alarm)
+    saved_delay, saved_interval = signal.setitimer(signal.ITIMER_REAL, max(seconds, 1e-3),
+                                                   REPEAT)
+    armed_at = time.monotonic()
+    try:
+        yield
+    finally:
+        try:
+            armed[0] = False
+        finally:   # runs even if the alarm fired just before the line above
+            _disarm(saved_handler, saved_delay, saved_interval, armed_at)
+
+
+def _disarm(saved_handler, saved_delay: float, saved_interval: float, armed_at: float) -> None:
+    signal.setitimer(signal.ITIMER_REAL, 0)
+    signal.signal(signal.SIGALRM, saved_handler if saved_handler is not None else signal.SIG_DFL)
+    if saved_delay > 0:   # someone else's timer: re-arm it for what is left of it
+        left = saved_delay - (time.monotonic() - armed_at)
+        signal.setitimer(signal.ITIMER_REAL, max(left, 1e-3), saved_interval)
+
+
+@contextlib.contextmanager
+def announced(label: str, say: Callable[[str], None] | None, slow: float,
+              verbose: bool = False) -> Iterator[None]:
+    """Tell ``say`` when the body has run for ``slow`` seconds and, then (or always when
+    ``verbose``), how long it took; nothing without ``say``."""
+    began = time.monotonic()
+    if say is None:
+        yield
+        return
+    announce = threading.Timer(slow, say, [f"{label} is running (over {slow:g} s so far) ..."])
+    announce.daemon = True
+    announce.start()
+    try:
+        yield
+    finally:
+        announce.cancel()
+        elapsed = time.monotonic() - began
+        if verbose or elapsed >= slow:
+            say(f"{label} took {elapsed:.2f} s")
