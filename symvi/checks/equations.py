@@ -35,7 +35,7 @@ from ..errors import ModelError
 from .hand import HandDerived
 from .equivalence import (Hand, coefficient_note, in_controls, is_zero, limit_note,
                           linear_unknowns, matrix_rank, scaled_increments, show, solve_linear)
-from .spaces import CONTINUOUS, Space, symbol_space
+from .spaces import ALGEBROID, CONTINUOUS, Space, symbol_space
 from .report import CheckResult
 
 NAME = "equations"
@@ -196,8 +196,8 @@ def _compare_values(hand: Hand, derived: list, spec: HandDerived):
         if note is None and spec.target == "target_map":
             note = limit_note(hand, H, D)
         if note is None:
-            c, groups = hand.locate(i, D)
-            factor = "" if c in (None, 1) else f" (hand ≈ {show(c)} × derived)"
+            c, groups = hand.locate(i, D, scale=1)     # a value has no free factor
+            factor = ""
             note = "differs" + factor + ": " + ("; ".join(groups) if groups else
                                                 f"hand − derived = {show(hand.show(H - D))}")
         results.append(EquationResult(label, False, note))
@@ -303,7 +303,7 @@ def run(ctx) -> CheckResult:
             return CheckResult.failed(NAME, f"equations must be HandDerived objects, got "
                                             f"{type(hand).__name__}")
         own = hand.model is None or hand.model is ctx.model
-        discrete = ctx.discrete if own and hand.target not in CONTINUOUS else None
+        discrete = ctx.discrete if own and hand.target not in CONTINUOUS + ALGEBROID else None
         derived = ctx.derived if own and hand.target == "residual" else None
         comparisons.append(compare(hand, ctx.model, discrete, derived))
     data = {"comparisons": [c.to_dict() for c in comparisons]}

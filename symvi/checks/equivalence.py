@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import re
 from collections import Counter
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping, Sequence
 
 import sympy as sp
 from sympy.core.function import AppliedUndef
@@ -167,19 +167,32 @@ def _split(expr: sp.Expr, variables) -> dict:
 
 
 def _locate(own: sp.Expr, values: dict, derived: sp.Expr, coefficients: set,
-            parameters: set) -> tuple[Any, list[str]]:
-    """The factor c that best matches ``own`` (hand, user's symbols) to ``derived``
-    (display symbols) and the differing terms of own − c·derived, grouped by the
-    parameters they carry. ``values`` gives the coefficient symbols' values."""
+            parameters: set, leading: Sequence = (), scale=None) -> tuple[Any, list[str]]:
+    """The factor c that matches ``own`` (hand, user's symbols) to ``derived`` (display
+    symbols) and the differing terms of own − c·derived, grouped by the parameters they
+    carry. ``values`` gives the coefficient symbols' values.
+
+    c is ``scale`` when given (a value claims equality: no factor is free). Otherwise the
+    linear part decides (issue 26, item 1): the most common ratio of the terms that are
+    one of the ``leading`` symbols (the jets: derivatives of the fibre coordinates and
+    multipliers) times parameters alone — the terms that fix an equation's normalisation,
+    which a slip in the bracket terms (a wrong lift, a sign in the structure constants:
+    C y η, at least quadratic) does not touch — and only without such terms the most
+    common ratio of all. So a display wrong in most of its terms is not explained by the complement
+    with the opposite sign, and a display multiplied by a factor is still that factor
+    times a right one."""
     variables = [s for s in own.free_symbols | derived.free_symbols
                  if s.name not in coefficients | parameters | {"h"}]
     H_own, D = _split(own, variables), _split(derived, variables)
     H = {m: sp.cancel(a.xreplace(values)) for m, a in H_own.items()}
     H = {m: a for m, a in H.items() if a != 0}
-    ratios = Counter(sp.cancel(H[m] / D[m]) for m in H if m in D and D[m] != 0)
-    if not ratios:
+    common = [m for m in H if m in D and D[m] != 0]
+    linear = set(leading)
+    principal = [m for m in common if m in linear]
+    ratios = Counter(sp.cancel(H[m] / D[m]) for m in principal or common)
+    if scale is None and not ratios:
         return None, []
-    c = ratios.most_common(1)[0][0]
+    c = scale if scale is not None else ratios.most_common(1)[0][0]
     keyed: dict = {}
 
     def key(coeff):
@@ -302,10 +315,13 @@ class Hand:
         return expr.xreplace({s: self.space.names[s.name] for s in expr.free_symbols
                               if s.name in self.space.names})
 
-    def locate(self, i: int, derived: sp.Expr):
-        """(factor c, differing term groups) of hand expression i against ``derived``."""
+    def locate(self, i: int, derived: sp.Expr, scale=None):
+        """(factor c, differing term groups) of hand expression i against ``derived``;
+        c is ``scale`` when given, else fixed by the space's leading symbols
+        (:func:`_locate`)."""
+        leading = [self.show(s) for s in self.space.leading]
         return _locate(self.own[i], self.coefficients, self.show(derived),
-                       {s.name for s in self.coefficients}, self.parameters)
+                       {s.name for s in self.coefficients}, self.parameters, leading, scale)
 
 
 def in_controls(space: Space, exprs) -> list | None:

@@ -25,8 +25,14 @@ TARGETS: dict[str, str] = {
     "target_map": "target β(g) of one element (action groupoid: φ(q, τ(hξ)))",
     "residual": "discrete Euler–Lagrange / Euler–Poincaré residual at a stencil's middle node "
                 "(§2.2, eq. delelg)",
+    "anchor": "q̇ = ρ(q) y, the anchor applied to the fibre velocities (§3.3.1)",
+    "structure_functions": "⟦a, b⟧^γ = C^γ_{αβ}(q) a^α b^β, the bracket of two sections "
+                           "with constant coefficients a, b (§3.3.1)",
+    "variation": "δ(q, y) = η^C, the complete lift of a time-dependent section η: "
+                 "δq^i = ρ^i_α η^α, δy^α = η̇^α + C^α_{βγ} y^β η^γ (§3.3.1)",
 }
-_VALUE_ONLY = ("lagrangian", "discrete_lagrangian", "discrete_action", "target_map")
+_VALUE_ONLY = ("lagrangian", "discrete_lagrangian", "discrete_action", "target_map",
+               "anchor", "structure_functions", "variation")
 
 
 @dataclass(frozen=True, eq=False)
@@ -57,7 +63,11 @@ class HandDerived:
         ``discrete_action`` those of its ``elements`` elements; ``euler_lagrange`` the
         jets of :func:`symvi.checks.jets.continuous_equations` (``Omega1_dddot``, ``theta1_d4``,
         ``lambda1_dot``), or functions of time (``Omega1(t)``, ``lambda1(t)``, their
-        derivatives; the base point's follow from the anchor).
+        derivatives; the base point's follow from the anchor). The algebroid's targets
+        use its base coordinates and fibre velocities (``Omega1``), ``anchor`` nothing
+        else, ``structure_functions`` the sections' coefficients ``a1 … an``,
+        ``b1 … bn``, ``variation`` the section ``eta1 … etan`` and its rates
+        ``eta1_dot … etan_dot``; each compares values, in the order (δq, δy).
     mode:
         ``"equations"`` (same solution set) or ``"value"`` (equal); default ``"value"``
         for Lagrangians and the target map, ``"equations"`` otherwise.

@@ -23,6 +23,8 @@ if TYPE_CHECKING:
 
 #: Targets compared in the continuous symbols (the others on discrete windows).
 CONTINUOUS = ("controls", "constraints", "lagrangian", "euler_lagrange")
+#: Targets that are the groupoid's algebroid itself (its base and fibre symbols).
+ALGEBROID = ("anchor", "structure_functions", "variation")
 
 
 @dataclass
@@ -67,6 +69,8 @@ def symbol_space(hand: HandDerived, model, discrete: DiscreteModel | None, deriv
     fixed = dict(model.parameters) | {STEP: 0.1}
     if hand.target in CONTINUOUS:
         return _continuous_space(hand, model, params, fixed)
+    if hand.target in ALGEBROID:
+        return _algebroid_space(hand.target, model, params, fixed)
     if hand.target == "residual":
         exprs, names, slots, fs = _residual_window(model, discrete, derived)
     elif hand.target == "discrete_action":
@@ -109,13 +113,47 @@ def _continuous_space(hand: HandDerived, model, params: dict, fixed: dict) -> Sp
                  controls=tuple(zip(c, model.controls)), leading=leading, fixed=fixed)
 
 
+def _algebroid_space(target: str, model, params: dict, fixed: dict) -> Space:
+    """The anchor ρ(q)y, the bracket C^γ_{αβ} a^α b^β of constant sections, or the complete
+    lift (ρη, η̇ + C y η) of the model's algebroid (paper §3.3.1) — the variation whose
+    stationarity gives the Euler–Lagrange equations the derivation uses."""
+    A = model.groupoid.algebroid()
+    n = len(A.y)
+
+    def named(stem: str, suffix: str = "") -> list:
+        return [sp.Symbol(f"{stem}{a + 1}{suffix}", real=True) for a in range(n)]
+
+    def bracket(a, b) -> list:
+        return [sum((C[i, j] * a[i] * b[j] for i in range(n) for j in range(n)), sp.S.Zero)
+                for C in A.structure]
+    if target == "anchor":
+        exprs, extra = list(A.anchor * sp.Matrix(A.y)), list(A.y)
+    elif target == "structure_functions":
+        a, b = named("a"), named("b")
+        exprs, extra = bracket(a, b), a + b
+    else:
+        eta, eta_dot = named("eta"), named("eta", "_dot")
+        exprs = list(A.anchor * sp.Matrix(eta)) + [
+            rate + term for rate, term in zip(eta_dot, bracket(A.y, eta))]
+        extra = list(A.y) + eta + eta_dot
+    symbols = list(A.q) + extra
+    names = [s.name for s in symbols]
+    if len(set(names)) != len(names):
+        raise ModelError(f"the {target} of {model.name!r}: its symbols "
+                         f"{sorted({x for x in names if names.count(x) > 1})} repeat a name "
+                         f"of the groupoid's coordinates")
+    return Space(exprs, {s.name: s for s in symbols} | params, symbols,
+                 {s: sp.Symbol(s.name) for s in symbols}, symbols, fixed=fixed)
+
+
 def _euler_lagrange_space(model, params: dict, fixed: dict) -> Space:
     """EL_r(L + λ_AΦ^A) and Φ^A in named jet symbols; hand expressions may be written in
     functions of time (:func:`symvi.checks.jets.continuous_equations`)."""
     eqs = continuous_equations(model)
     symbols = list(eqs.symbols.values())
     return Space(list(eqs.equations), eqs.symbols | params, symbols,
-                 {s: s for s in symbols}, list(eqs.leading), fixed=fixed, convert=eqs.named)
+                 {s: s for s in symbols}, list(eqs.leading), leading=list(eqs.leading),
+                 fixed=fixed, convert=eqs.named)
 
 
 def _residual_window(model, discrete, derived) -> tuple[list, dict, list, list]:
