@@ -152,3 +152,27 @@ def test_a_display_times_minus_one_is_recovered_not_blamed():
     assert result.ok, result.details()
     assert all(r.message.endswith("× -1") for r in result.equations[:3]), \
         [r.message for r in result.equations]
+
+
+@pytest.mark.parametrize("name, target", [("rigid_body_oc", "controls"),
+                                          ("heavy_top_rotors_oc", "constraints")])
+def test_a_wrong_lift_in_the_first_order_controlled_equations(name, target):
+    """EL(L) on the algebroid with the structure functions' sign flipped: u = IΩ̇ − Ω×IΩ
+    for the rigid body's torques, the heavy top's unactuated rows likewise; the report
+    names exactly the bracket terms, at scale +1."""
+    from symvi.declaration.control import euler_lagrange_operator as EL
+    model = get(name)
+    system = model.control_system
+    A = model.groupoid.algebroid()
+    wrong = EL(dataclasses.replace(A, structure=tuple(-C for C in A.structure)),
+               system.lagrangian)
+    right = EL(A, system.lagrangian)
+    rows = list(system.unactuated(len(A.y)) if target == "constraints" else system.actuated)
+    u = sp.symbols(f"u1:{len(rows) + 1}", real=True)
+    exprs = [wrong[r] - (u[k] if target == "controls" else 0) for k, r in enumerate(rows)]
+    result = compare(HandDerived("wrong lift", target, exprs), model)
+    assert not result.ok
+    for k, (row, r) in enumerate(zip(result.equations, rows)):
+        difference = plain(wrong[r] - right[r])
+        assert row.message.startswith(f"vs derived eq. {k + 1}: "), row.message
+        assert sp.expand(reported_difference(row.message) - difference) == 0, row.message
