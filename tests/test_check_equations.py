@@ -198,7 +198,8 @@ def test_errata_4_to_6_heavy_top(heavy_report):
         "constraints Φ¹, Φ², Φ³ (§3.3.5) (Φ³); paper's L̃ (§3.3.5); paper's cost C = ½(u₁² + "
         "u₂²) (§3.3.5); paper's printed Φ_d (§3.3.5) (Φ_d³); Appendix D's cay in "
         "Γ_{k+1} = cay(hξ_k)ᵀΓ_k (ERRATA 6); paper's optimality conditions (§3.3.2) for "
-        "this L̃, Φ (Φ¹, Φ², Φ³); ERRATA 8's optimality conditions (§3.3.2) for this L̃, Φ")
+        "this L̃, Φ (Φ¹, Φ², Φ³); ERRATA 8's optimality conditions (§3.3.2) for this L̃, Φ; "
+        "paper's optimality conditions with A, B, C (§3.3.5) (row 5)")
     # 4: spurious dot, missing −J₂θ̇₂Ω₃; sign of J₁θ̇₁Ω₃, missing −Ī₃Ω₁Ω₃ — also in Φ¹, Φ²
     for where in (f"{that_is}, eq. 1", "paper's constraints Φ¹, Φ², Φ³ (§3.3.5), Φ¹"):
         assert (f"{where}: vs derived eq. 1: I3bar*Omega2*Omega3_dot where "
@@ -315,5 +316,30 @@ def test_rows_are_paired_with_derived_equations_one_to_one():
         @staticmethod
         def locate(i, j):
             return (None, None) if i == 2 else (1, groups[i, j])
+
+        @staticmethod
+        def linear_mismatch(i, j, c):
+            return 0
     pairing = _pairing(Fake, [0, 1])
     assert [p[0] for p in pairing[:2]] == [1, 0] and pairing[2] is None
+
+
+def test_abc_display_rows_are_paired_by_their_linear_terms_and_the_potential_named(
+        heavy_report):
+    """§3.3.5's display with A, B, C: each Ω row is paired with its own Ω equation (its
+    J_i²Ω⃛_i, λ̈ terms), not with the one whose other terms happen to differ in fewer
+    groups, so each names the potential's Mgh·Γ·λ terms it lacks; the Φ³ row agrees."""
+    name = "paper's optimality conditions with A, B, C (§3.3.5)"
+    lines = {line.split(": ", 1)[0]: line.split(": ", 1)[1]
+             for line in heavy_report["equations"].details if line.startswith(name + ", ")}
+    assert verdicts(heavy_report)[(name, "row 5")]
+    pairs = {"row 6 (A)": ("eq. 1 × -1", "missing -Gamma3*Mgh*lambda1"),
+             "row 7 (C)": ("eq. 2", "missing Gamma3*Mgh*lambda2"),
+             "row 8": ("eq. 3 × -1", "missing Mgh*(Gamma1*lambda1 + Gamma2*lambda2)"),
+             "row 1": ("eq. 4 × -1/J1", None), "row 2": ("eq. 5 × -1/J2", None),
+             "row 3": ("eq. 6", None), "row 4": ("eq. 7", None)}
+    for row, (paired, missing) in pairs.items():
+        line = lines[f"{name}, {row}"]
+        assert line.startswith(f"vs derived {paired}: "), line
+        assert missing is None or missing in line.split("; "), line
+    assert f"{name}: undefined symbols lambda, lambda_dot" in heavy_report["equations"].details

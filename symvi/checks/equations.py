@@ -209,7 +209,8 @@ def _pairing(hand: Hand, derived: list) -> list:
     paired with, up to the factor c, or None (issue 26, item 2).
 
     The pairing is an optimal assignment — each derived equation to at most one display
-    row, the total of differing term groups least (SciPy's ``linear_sum_assignment``;
+    row, the total dissimilarity least: first the linear terms the pair does not share,
+    then the differing term groups (SciPy's ``linear_sum_assignment``;
     ties go to the row's own index) — not each row's own best: three rows that all look
     most like one equation are paired with three equations, so that each row's
     difference is told against its own. A row left over (more rows than equations) is
@@ -217,7 +218,9 @@ def _pairing(hand: Hand, derived: list) -> list:
     located = [[hand.locate(i, D) for D in derived] for i in range(len(hand.math))]
     if not located or not derived:
         return [None] * len(located)
-    cost = np.array([[_UNPAIRED if c is None else len(groups) + _OFF_DIAGONAL * (i != j)
+    cost = np.array([[_UNPAIRED if c is None else
+                      _LINEAR * hand.linear_mismatch(i, derived[j], c) + len(groups)
+                      + _OFF_DIAGONAL * (i != j)
                       for j, (c, groups) in enumerate(row)] for i, row in enumerate(located)])
     rows, columns = linear_sum_assignment(cost)
     pairing = [None] * len(located)
@@ -231,9 +234,11 @@ def _pairing(hand: Hand, derived: list) -> list:
     return pairing
 
 
-#: The cost of pairing a row with an equation no factor relates it to, and the tie-break
+#: The cost of pairing a row with an equation no factor relates it to, of each linear term
+#: (a highest derivative, a multiplier's) the pair does not share — which equation a row
+#: is comes first, how many groups of its other terms differ second — and the tie-break
 #: toward a row's own index.
-_UNPAIRED, _OFF_DIAGONAL = 1e6, 1e-3
+_UNPAIRED, _LINEAR, _OFF_DIAGONAL = 1e6, 100.0, 1e-3
 
 
 def _compare_equations(hand: Hand, derived: list, spec: HandDerived, space: Space):

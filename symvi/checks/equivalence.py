@@ -315,6 +315,18 @@ class Hand:
         return expr.xreplace({s: self.space.names[s.name] for s in expr.free_symbols
                               if s.name in self.space.names})
 
+    def linear_mismatch(self, i: int, derived: sp.Expr, c) -> int:
+        """How many linear terms (one of the space's leading symbols times parameters) of
+        hand expression i and c·``derived`` differ: which equation a row is, told by the
+        terms that fix its normalisation (its highest derivatives, its multipliers')."""
+        own, shown = self.own[i], self.show(derived)
+        names = {s.name for s in self.coefficients} | self.parameters | {"h"}
+        variables = [s for s in own.free_symbols | shown.free_symbols if s.name not in names]
+        H = {m: a.xreplace(self.coefficients) for m, a in _split(own, variables).items()}
+        D = _split(shown, variables)
+        linear = {self.show(s) for s in self.space.leading} & (set(H) | set(D))
+        return sum(sp.cancel(H.get(m, 0) - c * D.get(m, 0)) != 0 for m in linear)
+
     def locate(self, i: int, derived: sp.Expr, scale=None):
         """(factor c, differing term groups) of hand expression i against ``derived``;
         c is ``scale`` when given, else fixed by the space's leading symbols
