@@ -47,11 +47,12 @@ PIPELINE = ("symvi.discretisation.discretise", "symvi.derivation.derive", "symvi
 #: Packages and modules whose code never reaches a generated file: the import closure
 #: does not enter them. The checks read models and never build them; the bundled model
 #: files are data (a model's content is in its fingerprint); ``symvi.build`` itself
-#: (orchestration, loading, the key), the stage clock, and the lock and swap only run
-#: the build. What of them reaches the files (compile flags, compiler) is hashed by value.
+#: (orchestration, loading, the key), the stage clock and its timing, and the lock and
+#: swap only run the build. What of them reaches the files (compile flags, compiler) is
+#: hashed by value.
 _NOT_GENERATING_PACKAGES = ("symvi.checks", "symvi.models")
 _NOT_GENERATING_MODULES = ("symvi.cli", "symvi.build", "symvi.build.stages",
-                           "symvi.build.swap")
+                           "symvi.build.swap", "symvi.timing")
 #: The keyword of every import statement: only lines that contain it are searched. (A
 #: plain literal: the regular expression engine finds it fast; ``\b`` would slow it.)
 _IMPORT_WORD = re.compile("import")
