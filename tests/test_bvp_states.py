@@ -227,3 +227,9 @@ def test_batches_and_continuations_take_states(compiled):
     cold = slew.solve_bvp(State(g=np.eye(3), v=rest), State(g=quarter_turn(), v=rest), 50,
                           T=1.0, params={"I3": 3.4})
     assert path[-1].cost == pytest.approx(cold.cost, rel=1e-11)
+
+
+def test_repr_counts_the_states(compiled):
+    r = compiled("cubic_spline").solve_bvp(State(x=[0, 0], v=[0, 0]), State(x=[1, 0], v=[0, 0]),
+                                           10, T=1.0)
+    assert "10 steps, 11 states, 12 nodes" in repr(r)

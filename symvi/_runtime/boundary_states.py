@@ -47,6 +47,9 @@ def check_supported(model) -> None:
         raise ValueError(f"model {name!r}: States as boundary data need a pair groupoid or "
                          f"matrix Lie groups (this is a {model.info['kind']} groupoid); give "
                          f"the first and last two nodes")
+    if model.m and "manifold" in model.info["kernels"]:
+        raise ValueError(f"model {name!r}: its positions lie on a declared manifold, which "
+                         f"q ∓ hv/2 leaves; give the first and last two nodes")
     if model.end_free or model.end_count:
         raise ValueError(f"model {name!r}: its end is free or given by end conditions; give "
                          f"the start as nodes (a State fixes both ends)")

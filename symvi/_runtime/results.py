@@ -314,6 +314,10 @@ class BVPResult(_Result):
         final = {name: getattr(self, name) for name in ("x", "g", "f")
                  if getattr(self, name) is not None}
         cost = "" if self.cost is None else f", cost {self.cost:.6g}"
+        if self.t_states is not None:
+            return self._summary(f"{len(self.t_states) - 1} steps, {len(self.t_states)} "
+                                 f"states, {len(self.t)} nodes, {self.iterations} Newton "
+                                 f"iterations{cost}", final)
         return self._summary(f"{max(len(self.t) - 1, 0)} steps, {len(self.t)} nodes, "
                              f"{self.iterations} Newton iterations{cost}", final)
 
