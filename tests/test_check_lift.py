@@ -176,3 +176,32 @@ def test_a_wrong_lift_in_the_first_order_controlled_equations(name, target):
         difference = plain(wrong[r] - right[r])
         assert row.message.startswith(f"vs derived eq. {k + 1}: "), row.message
         assert sp.expand(reported_difference(row.message) - difference) == 0, row.message
+
+
+def test_a_wrong_display_with_permuted_rows_is_paired_back():
+    """The rigid body's wrong-lift conditions with their rows reversed: each row is told
+    against its own equation (the pairing recovered), with the same exact differences."""
+    model = get("rigid_body_oc")
+    right = continuous_equations(model).equations
+    wrong = negated_lift(model)
+    rows = [2, 1, 0]
+    result = compare(HandDerived("reversed", "euler_lagrange", [wrong[r] for r in rows]),
+                     model)
+    for row, r in zip(result.equations, rows):
+        assert row.message.startswith(f"vs derived eq. {r + 1}: "), row.message
+        assert sp.expand(reported_difference(row.message) - plain(wrong[r] - right[r])) == 0
+
+
+def test_lift_target_holds_the_complete_and_the_vertical_lift():
+    """On the heavy top (anchor Γ × ·, base point dependent): the complete lift's six
+    components and then the vertical lift's; a vertical lift written with η̇ is flagged."""
+    model = get("heavy_top")
+    Gamma, Omega = sp.Matrix(sp.symbols("Gamma1:4")), sp.Matrix(sp.symbols("Omega1:4"))
+    eta, eta_dot = sp.Matrix(sp.symbols("eta1:4")), sp.Matrix(sp.symbols("eta1_dot eta2_dot "
+                                                                          "eta3_dot"))
+    complete = list(Gamma.cross(eta)) + list(eta_dot + Omega.cross(eta))
+    vertical = [0, 0, 0] + list(eta)
+    assert compare(HandDerived("η^C, η^V", "lift", complete + vertical), model).ok
+    assert compare(HandDerived("η^V", "lift", list(eta), select=(9, 10, 11)), model).ok
+    wrong = compare(HandDerived("η^V", "lift", list(eta_dot), select=(9, 10, 11)), model)
+    assert not wrong.ok and all("eta" in r.message for r in wrong.equations)

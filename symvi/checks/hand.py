@@ -30,9 +30,12 @@ TARGETS: dict[str, str] = {
                            "with constant coefficients a, b (§3.3.1)",
     "variation": "δ(q, y) = η^C, the complete lift of a time-dependent section η: "
                  "δq^i = ρ^i_α η^α, δy^α = η̇^α + C^α_{βγ} y^β η^γ (§3.3.1)",
+    "lift": "the complete lift η^C (as ``variation``) and then the vertical lift "
+            "η^V = (0, η) of a section η, in the coordinates (q, y) (§3.3.1); "
+            "``select`` picks components",
 }
 _VALUE_ONLY = ("lagrangian", "discrete_lagrangian", "discrete_action", "target_map",
-               "anchor", "structure_functions", "variation")
+               "anchor", "structure_functions", "variation", "lift")
 
 
 @dataclass(frozen=True, eq=False)
@@ -66,8 +69,8 @@ class HandDerived:
         derivatives; the base point's follow from the anchor). The algebroid's targets
         use its base coordinates and fibre velocities (``Omega1``), ``anchor`` nothing
         else, ``structure_functions`` the sections' coefficients ``a1 … an``,
-        ``b1 … bn``, ``variation`` the section ``eta1 … etan`` and its rates
-        ``eta1_dot … etan_dot``; each compares values, in the order (δq, δy).
+        ``b1 … bn``, ``variation`` and ``lift`` the section ``eta1 … etan`` and its
+        rates ``eta1_dot … etan_dot``; each compares values, in the order (δq, δy).
     mode:
         ``"equations"`` (same solution set) or ``"value"`` (equal); default ``"value"``
         for Lagrangians and the target map, ``"equations"`` otherwise.

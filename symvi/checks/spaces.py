@@ -24,7 +24,7 @@ if TYPE_CHECKING:
 #: Targets compared in the continuous symbols (the others on discrete windows).
 CONTINUOUS = ("controls", "constraints", "lagrangian", "euler_lagrange")
 #: Targets that are the groupoid's algebroid itself (its base and fibre symbols).
-ALGEBROID = ("anchor", "structure_functions", "variation")
+ALGEBROID = ("anchor", "structure_functions", "variation", "lift")
 
 
 @dataclass
@@ -116,7 +116,8 @@ def _continuous_space(hand: HandDerived, model, params: dict, fixed: dict) -> Sp
 def _algebroid_space(target: str, model, params: dict, fixed: dict) -> Space:
     """The anchor ρ(q)y, the bracket C^γ_{αβ} a^α b^β of constant sections, or the complete
     lift (ρη, η̇ + C y η) of the model's algebroid (paper §3.3.1) — the variation whose
-    stationarity gives the Euler–Lagrange equations the derivation uses."""
+    stationarity gives the Euler–Lagrange equations the derivation uses — followed, for
+    ``lift``, by the vertical lift (0, η)."""
     A = model.groupoid.algebroid()
     n = len(A.y)
 
@@ -135,6 +136,8 @@ def _algebroid_space(target: str, model, params: dict, fixed: dict) -> Space:
         eta, eta_dot = named("eta"), named("eta", "_dot")
         exprs = list(A.anchor * sp.Matrix(eta)) + [
             rate + term for rate, term in zip(eta_dot, bracket(A.y, eta))]
+        if target == "lift":                  # then the vertical lift (0, η)
+            exprs += [sp.S.Zero] * len(A.q) + eta
         extra = list(A.y) + eta + eta_dot
     symbols = list(A.q) + extra
     names = [s.name for s in symbols]
