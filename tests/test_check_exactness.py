@@ -8,7 +8,7 @@ import re
 import pytest
 import sympy as sp
 
-from symvi.checks.equations import compare
+from symvi.checks.equations import HandDerived, compare
 from symvi.checks.equivalence import Hand, in_controls
 from symvi.checks.spaces import symbol_space
 from symvi.fixtures import paper_heavy_top_rotors, paper_rigid_body
@@ -89,3 +89,24 @@ def test_reported_groups_add_up_to_the_difference(fixture, display):
         checked += 1
     assert checked or not any(r.message.startswith(("vs derived", "differs: "))
                               for r in comparison.equations if not r.ok)
+
+
+def test_the_corrected_heavy_top_displays_pass():
+    """ERRATA 4 as corrected there (the scalar equations after "That is,", and Φ¹, Φ²
+    with them) and ERRATA 5's L_d — the definition's h·L̃ at (ξ_{k,k+1}, θ_{k+2/h²}) —
+    agree with the derivation (the other corrected displays are in the fixtures)."""
+    T = paper_heavy_top_rotors
+    Om, Om_dot, G = T.Om, T.Om_dot, T.Gamma
+    th_dot, th_ddot = T.th_dot, T.th_ddot
+    that_is = [
+        sp.Eq(T.g1 * Om_dot[0] + T.J1 * th_ddot[0] - T.g2 * Om[1] * Om[2]
+              - T.J2 * th_dot[1] * Om[2] + T.I3 * Om[1] * Om[2], T.Mgh * G[1]),
+        sp.Eq(T.g2 * Om_dot[1] + T.J2 * th_ddot[1] + T.g1 * Om[0] * Om[2]
+              + T.J1 * th_dot[0] * Om[2] - T.I3 * Om[0] * Om[2], -T.Mgh * G[0]),
+        T.THAT_IS[2]]
+    result = compare(HandDerived("ERRATA 4 corrected", "constraints", that_is), T.model)
+    assert result.ok, result.details()
+    L_d = T.h * T.L_tilde(T.xi_diff, T.th_ddiff)
+    result = compare(HandDerived("ERRATA 5 corrected", "discrete_lagrangian", [L_d],
+                                 symbols=T.WINDOW), T.model)
+    assert result.ok, result.details()
