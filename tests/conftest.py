@@ -22,7 +22,7 @@ from symvi.derivation.derive import derive  # noqa: E402
 from symvi.discretisation.discretise import discretise  # noqa: E402
 from symvi.models import BOUNDED, BUNDLED, CONTROL, get  # noqa: E402
 
-FIRST_ORDER = ("harmonic_oscillator", "pendulum", "double_pendulum")
+FIRST_ORDER = ("harmonic_oscillator", "pendulum", "double_pendulum", "robot_arm")
 SECOND_ORDER = ("cubic_spline", "spline_potential")
 #: Bundled models on the pair groupoid (node-based oracle, Taylor consistency).
 PAIR = FIRST_ORDER + SECOND_ORDER

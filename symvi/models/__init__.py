@@ -15,7 +15,7 @@ from ..declaration.model import Model
 
 _GROUP_MODELS = ("rigid_body", "heavy_top", "spherical_pendulum", "planar_body", "se3_body",
                  "rigid_body_oc", "heavy_top_rotors_oc")
-BUNDLED = ("harmonic_oscillator", "pendulum", "double_pendulum", "cubic_spline",
+BUNDLED = ("harmonic_oscillator", "pendulum", "double_pendulum", "robot_arm", "cubic_spline",
            "spline_potential", "so3_cubic", "double_pendulum_oc", "cart_pole_oc",
            "heavy_top_rotors_oc_variational", "spacecraft_slew", "minimum_time_slew",
            "cart_pole_swing_up", "planar_flyer", "cart_pole_catch") \

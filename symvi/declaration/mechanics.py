@@ -1,0 +1,107 @@
+"""Models from ``sympy.physics.mechanics`` (issue 23, item 3).
+
+Users of PyDy and SymPy mechanics build multibody systems from frames, bodies and joints,
+with generalised coordinates as ``dynamicsymbols`` q(t). :func:`from_system` turns such a
+system into a :class:`~symvi.declaration.model.Model` on the pair groupoid Q×Q: its
+Lagrangian L = Σ T − V, the generalised speeds eliminated through the system's kinematic
+differential equations (u = q̇ for joints), each q(t) and q̇(t) renamed to the groupoid's
+``q`` and ``q_dot`` symbols, and the remaining symbols as parameters.
+
+The potential V is each body's ``potential_energy`` plus that of the system's constant
+forces (``System.apply_uniform_gravity``): a force F fixed in the inertial frame at a
+point P is conservative with V = −F·r_P. Any other load (a torque, a force that depends
+on the state or on time) is not a Lagrangian system and is refused by name.
+"""
+from __future__ import annotations
+
+from typing import Any, Mapping, Sequence
+
+import sympy as sp
+
+from ..errors import ModelError
+from ..groupoids import PairGroupoid
+from .model import Model
+
+
+def from_system(system, *, name: str, parameters: Mapping[Any, float],
+                **options) -> Model:
+    """The :class:`Model` of a ``sympy.physics.mechanics.System`` on Q×Q.
+
+    ``parameters`` gives a default value to every symbol of the Lagrangian other than the
+    coordinates (masses, lengths, g), by Symbol or name; ``options`` go to :class:`Model`
+    (``example``, ``description``, ``discretisation``, ``symmetries``).
+    """
+    from sympy.physics.mechanics import dynamicsymbols
+    coordinates = list(system.q)
+    if not coordinates:
+        raise ModelError(f"{name}: the system has no generalised coordinates")
+    t = dynamicsymbols._t
+    speeds = _speeds(system, t, name)
+    frame, origin = system.frame, system.fixed_point
+    kinetic = sum((body.kinetic_energy(frame) for body in system.bodies), sp.S.Zero)
+    potential = sum((getattr(body, "potential_energy", 0) for body in system.bodies),
+                    sp.S.Zero) + _load_potential(system.loads, frame, origin, t, name)
+    return from_lagrangian((kinetic - potential).xreplace(speeds), coordinates, name=name,
+                           parameters=parameters, **options)
+
+
+def from_lagrangian(lagrangian, coordinates: Sequence, *, name: str,
+                    parameters: Mapping[Any, float], **options) -> Model:
+    """The :class:`Model` on Q×Q of a Lagrangian L(q(t), q̇(t)) written in
+    ``dynamicsymbols`` ``coordinates``; see :func:`from_system`."""
+    from sympy.physics.mechanics import dynamicsymbols
+    t = dynamicsymbols._t
+    names = []
+    for q in coordinates:
+        if not (isinstance(q, sp.Function) and q.args == (t,)):
+            raise ModelError(f"{name}: coordinate {q} is not a dynamicsymbol q(t)")
+        names.append(str(q.func))
+    G = PairGroupoid(names)
+    rates = {q.diff(t): v for q, v in zip(coordinates, G.qdot)}
+    L = sp.sympify(lagrangian).xreplace(rates).xreplace(dict(zip(coordinates, G.q)))
+    left = L.atoms(sp.Derivative) | {f for f in L.atoms(sp.Function) if t in f.free_symbols}
+    if left:
+        raise ModelError(f"{name}: the Lagrangian still holds {sorted(map(str, left))} after "
+                         f"the coordinates {names} and their rates are substituted (an "
+                         f"acceleration, a speed without a kinematic equation, or another "
+                         f"function of time)")
+    if t in L.free_symbols:
+        raise ModelError(f"{name}: the Lagrangian depends on time {t} explicitly")
+    given = {(k if isinstance(k, str) else k.name): v for k, v in parameters.items()}
+    symbols = {s.name: s for s in L.free_symbols - set(G.q) - set(G.qdot)}
+    missing, unused = sorted(set(symbols) - set(given)), sorted(set(given) - set(symbols))
+    if missing or unused:
+        raise ModelError(f"{name}: parameters must give a value to each symbol of the "
+                         f"Lagrangian besides the coordinates"
+                         + (f"; missing: {', '.join(missing)}" if missing else "")
+                         + (f"; not in the Lagrangian: {', '.join(unused)}" if unused else ""))
+    return Model(name=name, groupoid=G, lagrangian=L,
+                 parameters={symbols[n]: given[n] for n in sorted(symbols)}, **options)
+
+
+def _speeds(system, t, name: str) -> dict:
+    """Each generalised speed u(t) as the rates q̇ through the kinematic equations."""
+    speeds = list(system.u)
+    if not speeds:
+        return {}
+    solution = sp.solve(list(system.kdes), speeds, dict=True)
+    if len(solution) != 1 or set(solution[0]) != set(speeds):
+        raise ModelError(f"{name}: the kinematic differential equations do not give the "
+                         f"speeds {speeds} as functions of the coordinates and their rates")
+    return solution[0]
+
+
+def _load_potential(loads, frame, origin, t, name: str) -> sp.Expr:
+    """V of the constant forces among ``loads``; any other load refused."""
+    from sympy.physics.mechanics import Force
+    total = sp.S.Zero
+    for load in loads:
+        if not isinstance(load, Force):
+            raise ModelError(f"{name}: load {load} is not a force: a Lagrangian system "
+                             f"takes no torques (give it a potential energy instead)")
+        force = load.force.to_matrix(frame)
+        if any(t in c.free_symbols or c.atoms(sp.Function) for c in force):
+            raise ModelError(f"{name}: the force {load.force} on {load.point} is not "
+                             f"constant in {frame}: not conservative")
+        total -= load.force.dot(load.point.pos_from(origin))
+    return total
