@@ -10,7 +10,9 @@ differential equations (u = q̇ for joints), each q(t) and q̇(t) renamed to the
 The potential V is each body's ``potential_energy`` plus that of the system's constant
 forces (``System.apply_uniform_gravity``): a force F fixed in the inertial frame at a
 point P is conservative with V = −F·r_P. Any other load (a torque, a force that depends
-on the state or on time) is not a Lagrangian system and is refused by name.
+on the state or on time) is not a Lagrangian system and is refused by name, as are
+holonomic constraints (the coordinates must be independent) and nonholonomic ones (not
+variational).
 """
 from __future__ import annotations
 
@@ -36,6 +38,7 @@ def from_system(system, *, name: str, parameters: Mapping[Any, float],
     if not coordinates:
         raise ModelError(f"{name}: the system has no generalised coordinates")
     t = dynamicsymbols._t
+    _check_unconstrained(system, name)
     speeds = _speeds(system, t, name)
     frame, origin = system.frame, system.fixed_point
     kinetic = sum((body.kinetic_energy(frame) for body in system.bodies), sp.S.Zero)
@@ -77,6 +80,22 @@ def from_lagrangian(lagrangian, coordinates: Sequence, *, name: str,
                          + (f"; not in the Lagrangian: {', '.join(unused)}" if unused else ""))
     return Model(name=name, groupoid=G, lagrangian=L,
                  parameters={symbols[n]: given[n] for n in sorted(symbols)}, **options)
+
+
+def _check_unconstrained(system, name: str) -> None:
+    """Refuse constraints between the coordinates or speeds: the pair groupoid's path has
+    independent coordinates, and a nonholonomic system is not variational (its
+    Lagrange–d'Alembert equations are not Euler–Lagrange equations of any L)."""
+    if len(system.nonholonomic_constraints) or len(system.u_dep):
+        raise ModelError(f"{name}: the system has nonholonomic constraints "
+                         f"{list(system.nonholonomic_constraints)}: its motion obeys "
+                         f"Lagrange–d'Alembert, not a variational principle symvi can "
+                         f"discretise from a Lagrangian")
+    if len(system.holonomic_constraints) or len(system.q_dep):
+        raise ModelError(f"{name}: the system has holonomic constraints "
+                         f"{list(system.holonomic_constraints)} between its coordinates: "
+                         f"choose independent coordinates (a minimal set) for the pair "
+                         f"groupoid")
 
 
 def _speeds(system, t, name: str) -> dict:
