@@ -190,7 +190,9 @@ class StepResult(_Result):
         is the node pair (ν_k, ν_{k+1}); states 0, 1 from F⁻L_d, the rest from F⁺L_d).
     energy : (E,) discrete energy −∂L_d/∂h per element (first-order models), else None.
     noether : (E−2r+2, s) conserved quantities F_Z of the model's declared symmetries at
-        nodes r−1, r, … (paper §4.4), one column per symmetry, else None.
+        nodes r−1, r, … (paper §4.4), one column per symmetry, else None. Momenta,
+        energies and conserved quantities are None with ``integrate(...,
+        quantities=False)``.
     newton_iterations : (E − K + 1,) Newton iterations of each computed step (the first
         K − 1 elements, given or from the Legendre transform, took none).
     status, success, message : outcome; on failure the arrays hold the path up to the

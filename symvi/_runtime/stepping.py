@@ -39,7 +39,7 @@ BUFFER_STEPS = 2**16
 def integrate(model, initial, n_steps: int, h: float, params: Mapping[str, float] | None = None,
               *, maxiter: int = 50,
               xtol: float = 1e-12, ftol: float = 0.0, keep_every: int = 1,
-              raise_on_failure: bool = False) -> StepResult:
+              quantities: bool = True, raise_on_failure: bool = False) -> StepResult:
     """Integrate ``n_steps`` steps of the discrete Euler–Lagrange equations.
 
     Parameters
@@ -65,6 +65,9 @@ def integrate(model, initial, n_steps: int, h: float, params: Mapping[str, float
         the steps that computed them; ``t`` gives their times), so that a long run fits
         in memory. A run whose stored path would not fit is refused before anything is
         allocated, with a ``MemoryError`` giving the estimate.
+    quantities : compute the momenta, energies and conserved quantities along the path
+        (True); False returns the path alone (those fields None), no work past the
+        step loop: on the pendulum they take a fifth of the call's time.
     raise_on_failure : raise :class:`NewtonError` instead of returning a failed result.
 
     A step whose Jacobian is singular (the step map is not defined there) fails with
@@ -76,7 +79,7 @@ def integrate(model, initial, n_steps: int, h: float, params: Mapping[str, float
     within a fraction of a second (``KeyboardInterrupt``).
     """
     return run_steps(model, initial, n_steps, h, params, maxiter, xtol, ftol, keep_every,
-                     raise_on_failure)
+                     raise_on_failure, quantities=quantities)
 
 
 class Stopped(Exception):
@@ -85,7 +88,7 @@ class Stopped(Exception):
 
 def run_steps(model, initial, n_steps: int, h: float, params, maxiter: int, xtol: float,
               ftol: float, keep_every: int, raise_on_failure: bool,
-              stop: threading.Event | None = None) -> StepResult:
+              stop: threading.Event | None = None, quantities: bool = True) -> StepResult:
     """:func:`integrate`, stopping (:class:`Stopped`) between two chunks once ``stop`` is
     set: how a batch (:mod:`.batch`) ends its worker threads promptly."""
     from_state, K = isinstance(initial, State), model.stencil_elements
@@ -98,7 +101,9 @@ def run_steps(model, initial, n_steps: int, h: float, params, maxiter: int, xtol
     z0, g0 = model.initial_state(initial, h, p)
     new = n_steps - (K - 1)         # the initial elements are the first steps
     check_memory(model, n_steps, keep, BUFFER_STEPS if keep > 1 else 0)
-    run = _Run(model, new, keep, p, h, stop)
+    if not isinstance(quantities, bool):
+        raise TypeError(f"quantities must be True or False, got {quantities!r}")
+    run = _Run(model, new, keep, p, h, stop, quantities)
     code, steps, rnorm, iterations = run.loop(z0, g0, maxiter, xtol, ftol)
     status = Status(code)
     message = outcome(status, n_steps, K, from_state, steps, h, maxiter, iterations, rnorm)
@@ -140,13 +145,15 @@ class _Quantity:
     first: int = 0
 
 
-def layout(model) -> tuple[list[_Quantity], dict[str, tuple[int, int, tuple]]]:
+def layout(model, quantities: bool = True) -> tuple[list[_Quantity],
+                                                   dict[str, tuple[int, int, tuple]]]:
     """The derived quantities, and every stored field as (lag, offset, shape): a path of E
     elements has E + lag entries of the field, entry i belonging to node i + offset.
 
     Momenta: states 0 … r−1 from F⁻L_d, state i + r from F⁺L_d on window i, state j at
     node j; the energy of each element; the conserved quantities of window i at node
-    i + r − 1 (paper §4.4); the Newton iterations of step s at node K + s.
+    i + r − 1 (paper §4.4); the Newton iterations of step s at node K + s. Without
+    ``quantities``, the path alone.
     """
     r, n, K = model.order, model.n, model.stencil_elements
 
@@ -154,32 +161,34 @@ def layout(model) -> tuple[list[_Quantity], dict[str, tuple[int, int, tuple]]]:
         return (model.info["kernels"][kernel]["nz"] - model.m) // n
 
     w, G = width("momentum_plus"), model.info["configuration_dim"]
-    quantities = [_Quantity("momenta", "momentum_minus", w, 0, r),
-                  _Quantity("momenta", "momentum_plus", w, r)]
-    fields = {"x": (1, 0, (model.m,)), "f": (0, 0, (n,)), "newton_iterations": (1 - K, K, ()),
-              "momenta": (r - w + 1, 0, (n,) if r == 1 else (r, n))}
+    fields = {"x": (1, 0, (model.m,)), "f": (0, 0, (n,)), "newton_iterations": (1 - K, K, ())}
     if G:
         fields["g"] = (1, 0, (G,))
+    if not quantities:
+        return [], fields
+    derived = [_Quantity("momenta", "momentum_minus", w, 0, r),
+               _Quantity("momenta", "momentum_plus", w, r)]
+    fields["momenta"] = (r - w + 1, 0, (n,) if r == 1 else (r, n))
     if model.info["has_energy"]:
-        quantities.append(_Quantity("energy", "energy", width("energy")))
+        derived.append(_Quantity("energy", "energy", width("energy")))
         fields["energy"] = (1 - width("energy"), 0, ())
     if model.info.get("symmetries"):
-        quantities.append(_Quantity("noether", "noether", width("noether")))
+        derived.append(_Quantity("noether", "noether", width("noether")))
         fields["noether"] = (1 - width("noether"), r - 1, (len(model.info["symmetries"]),))
-    return quantities, fields
+    return derived, fields
 
 
 class _Run:
     """The stored series of one run and the chunk loop that fills them."""
 
     def __init__(self, model, n_steps: int, keep: int, p: np.ndarray, h: float,
-                 stop: threading.Event | None = None):
+                 stop: threading.Event | None = None, quantities: bool = True):
         self.model, self.n_steps, self.keep, self.p, self.h = model, n_steps, keep, p, h
         self.stop = stop
         m, n, K = model.m, model.n, model.stencil_elements
         E, G = K - 1 + n_steps, model.info["configuration_dim"]
         self.G = G
-        self.quantities, self.fields = layout(model)
+        self.quantities, self.fields = layout(model, quantities)
         self.series = {name: Series.empty(E + lag, offset, keep, shape,
                                           np.intc if name == "newton_iterations" else float)
                        for name, (lag, offset, shape) in self.fields.items()}
