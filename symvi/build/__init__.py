@@ -50,11 +50,13 @@ __all__ = ["MANIFEST", "COMPILE_ARGS", "cache_key", "compile_model", "find_compi
 #: model then compiles to a bitwise-identical extension.
 COMPILE_ARGS = ["-O3", "-std=c99", "-fno-math-errno", "-g0"]
 #: Generated C longer than this many characters is compiled at -O2 instead (issue 23).
-#: Measured with gcc 12: -O3 steps small models 5–15 % faster than -O2 (double pendulum,
-#: the 10-link chain's 240 kB), but on the 20-link chain's 780 kB of straight-line kernels
-#: it compiles in 35 s against 27 s, register allocation taking a third of it. The same
-#: arithmetic either way: no -ffast-math, so NaN checks keep working and results agree.
-LARGE_SOURCE = 400_000
+#: Measured with gcc 12 (compile s, -O3 → -O2; step loop over 2·10⁴ steps): the double
+#: pendulum's 63 kB 2.4 → 2.0, its loop 17 % slower at -O2; the heavy top's 135 kB 5.9 →
+#: 4.3, loop no slower; se3_body's 182 kB 8.8 → 6.1, loop 12 % slower; the 10-link chain's
+#: 240 kB 8.8 → 6.7, loop as fast; the 20-link chain's 780 kB 35 → 27 (register
+#: allocation a third of it). Large models are compiled more often than their loops are
+#: timed. The same arithmetic either way: no -ffast-math, so NaN checks keep working.
+LARGE_SOURCE = 150_000
 LARGE_SOURCE_ARGS = ["-O2", *COMPILE_ARGS[1:]]
 
 
