@@ -3,8 +3,9 @@
 SymPy cannot be asked to stop, but pure-Python work can be interrupted: ``SIGALRM``
 (``setitimer``) raises :class:`Expired` in the main thread at the deadline, repeated
 every :data:`REPEAT` seconds in case the code catches the first one. Python allows
-signal handlers in the main thread only; elsewhere the work runs to its end. A caller's
-own timer is re-armed afterwards for what is left of it.
+signal handlers in the main thread only; elsewhere the work runs to its end. So does it
+while another timer is pending (a caller's alarm, pytest-timeout's): that timer and its
+handler are left alone, to fire when their owner asked.
 """
 from __future__ import annotations
 
@@ -16,6 +17,8 @@ from typing import Callable, Iterator
 
 #: Once the deadline has passed, SIGALRM is repeated this often (seconds).
 REPEAT = 0.1
+#: The longest delay armed (seconds): a year.
+MAXIMUM = 3.2e7
 
 
 class Expired(BaseException):
@@ -24,8 +27,11 @@ class Expired(BaseException):
 
 
 def interruptible() -> bool:
-    """Whether :func:`interrupted_after` can interrupt work here (the main thread, Unix)."""
-    return hasattr(signal, "setitimer") and threading.current_thread() is threading.main_thread()
+    """Whether :func:`interrupted_after` can interrupt work here: the main thread, on Unix,
+    with no other timer pending."""
+    return (hasattr(signal, "setitimer")
+            and threading.current_thread() is threading.main_thread()
+            and signal.getitimer(signal.ITIMER_REAL)[0] == 0.0)
 
 
 @contextlib.contextmanager
@@ -42,24 +48,17 @@ def interrupted_after(seconds: float | None) -> Iterator[None]:
             raise Expired()
 
     saved_handler = signal.signal(signal.SIGALRM, on_alarm)
-    saved_delay, saved_interval = signal.setitimer(signal.ITIMER_REAL, max(seconds, 1e-3),
-                                                   REPEAT)
-    armed_at = time.monotonic()
     try:
+        # a year at most: setitimer overflows time_t on larger delays
+        signal.setitimer(signal.ITIMER_REAL, min(max(seconds, 1e-3), MAXIMUM), REPEAT)
         yield
     finally:
         try:
             armed[0] = False
         finally:   # runs even if the alarm fired just before the line above
-            _disarm(saved_handler, saved_delay, saved_interval, armed_at)
-
-
-def _disarm(saved_handler, saved_delay: float, saved_interval: float, armed_at: float) -> None:
-    signal.setitimer(signal.ITIMER_REAL, 0)
-    signal.signal(signal.SIGALRM, saved_handler if saved_handler is not None else signal.SIG_DFL)
-    if saved_delay > 0:   # someone else's timer: re-arm it for what is left of it
-        left = saved_delay - (time.monotonic() - armed_at)
-        signal.setitimer(signal.ITIMER_REAL, max(left, 1e-3), saved_interval)
+            signal.setitimer(signal.ITIMER_REAL, 0)
+            signal.signal(signal.SIGALRM, saved_handler if saved_handler is not None
+                          else signal.SIG_DFL)
 
 
 @contextlib.contextmanager

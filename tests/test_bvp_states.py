@@ -233,3 +233,24 @@ def test_repr_counts_the_states(compiled):
     r = compiled("cubic_spline").solve_bvp(State(x=[0, 0], v=[0, 0]), State(x=[1, 0], v=[0, 0]),
                                            10, T=1.0)
     assert "10 steps, 11 states, 12 nodes" in repr(r)
+
+
+def test_failed_and_mismatched_results_from_states(compiled):
+    """A failed States solve keeps T = N·h; a warm start from a States result with other
+    steps names the user's numbers; a non-finite path attaches no states, without error."""
+    import numpy as np
+    from dataclasses import replace as replaced
+    from symvi._runtime import boundary_states
+    mod = compiled("rigid_body_oc")
+    rest = np.zeros(3)
+    failed = mod.solve_bvp(State(g=np.eye(3), v=rest), State(g=quarter_turn(), v=rest), 20,
+                           T=1.0, maxiter=1)
+    assert not failed.success and failed.T == 1.0
+    r = mod.solve_bvp(State(g=np.eye(3), v=rest), State(g=quarter_turn(), v=rest), 20, T=1.0)
+    with pytest.raises(ValueError, match=r"own number of steps \(20\), not n_steps = 30"):
+        mod.solve_bvp(State(g=np.eye(3), v=rest), State(g=quarter_turn(), v=rest), 30, T=1.0,
+                      guess=r)
+    nodes = replaced(r, t=r.t + 0.5 * r.t_states[1], g=np.full_like(r.g, np.nan),
+                     states=None, t_states=None)
+    again = boundary_states.attach(mod.model, nodes, r.t_states[1])
+    assert again.states is None and again.T == 1.0

@@ -82,8 +82,31 @@ def test_budget_interrupts_python_work_and_restores_the_timer():
     worker.join()
     assert out == [3]
     assert signal.getitimer(signal.ITIMER_REAL) == (0.0, 0.0)
-    with pytest.raises(ValueError, match="positive number of seconds"):
-        Budget(0)
+    for bad in (0, float("inf"), True):
+        with pytest.raises(ValueError, match="positive, finite number of seconds"):
+            Budget(bad)
+
+
+def test_a_callers_timer_is_left_to_fire_on_time():
+    """With another timer pending (a caller's alarm, pytest-timeout's) the budget does not
+    take SIGALRM over: the part runs to its end and the caller's alarm fires when due."""
+    fired = []
+    previous = signal.signal(signal.SIGALRM, lambda s, f: fired.append(time.monotonic()))
+    try:
+        start = time.monotonic()
+        signal.setitimer(signal.ITIMER_REAL, 0.3)
+        budget = Budget(5.0)
+        budget.begin()
+
+        def work():
+            while time.monotonic() - start < 1.0:
+                pass
+            return "done"
+        assert budget.attempt("work", work) == "done"
+        assert len(fired) == 1 and fired[0] - start < 0.6, [f - start for f in fired]
+    finally:
+        signal.setitimer(signal.ITIMER_REAL, 0)
+        signal.signal(signal.SIGALRM, previous)
 
 
 def test_cli_prints_each_check_and_what_the_budget_skipped(tmp_path, capsys):

@@ -343,3 +343,14 @@ def test_abc_display_rows_are_paired_by_their_linear_terms_and_the_potential_nam
         assert line.startswith(f"vs derived {paired}: "), line
         assert missing is None or missing in line.split("; "), line
     assert f"{name}: undefined symbols lambda, lambda_dot" in heavy_report["equations"].details
+
+
+def test_one_wrong_linear_coefficient_is_that_term():
+    """The scale comes from the linear terms only where they agree: 2Ω̇₁ − P₁Ω₂Ω₃ − u₁
+    has Ω̇₁ and u₁ disagreeing, so the majority decides and blames 2Ω̇₁ alone."""
+    typo = 2 * W_dot[0] - RIGID.P[0] * W[1] * W[2] - u[0]
+    result = rigid([typo, E2, E3])
+    assert not result.ok and result.equations[1].ok and result.equations[2].ok
+    assert result.equations[0].message == (
+        "vs derived eq. 1 × 1/I1: 2*Omega1_dot where Omega1_dot is right (2 times the right "
+        "one)")

@@ -181,3 +181,15 @@ def test_constrained_systems_are_refused():
     system.add_nonholonomic_constraints(omega - 1)
     with pytest.raises(ModelError, match="nonholonomic"):
         from_system(system, name="bad", parameters={"m": 1.0, "l": 2.0, "g": 9.81})
+
+
+def test_actuators_are_refused_like_loads():
+    """SymPy adds actuators' loads only in form_eoms: a torque actuator is refused, not
+    silently dropped from the Lagrangian."""
+    from sympy.physics.mechanics import TorqueActuator
+    system, theta, (m, l, g) = pendulum_system()
+    ground = system.bodies[0]
+    system.add_actuators(TorqueActuator(-sp.Symbol("k") * theta, ground.frame.z,
+                                        system.bodies[1], ground))
+    with pytest.raises(ModelError, match="not a force"):
+        from_system(system, name="bad", parameters={"m": 1.0, "l": 2.0, "g": 9.81})

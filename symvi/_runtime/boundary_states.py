@@ -24,7 +24,6 @@ import numpy as np
 
 from . import arguments
 from .geometry import check_base_points, check_configurations
-from .paths import flat_configurations
 from .results import BVPResult, State
 
 
@@ -89,20 +88,21 @@ def _retract(model, g: np.ndarray, f: np.ndarray, h: float) -> np.ndarray | None
 
 def attach(model, result: BVPResult, h: float) -> BVPResult:
     """``result`` of the node problem as the States solve's: node times at the half steps,
-    and the states at t_k = k·h (the elements' midpoints) as ``states``."""
+    ``t_states`` = k·h (so that ``T`` is N·h, failed or not) and, where the path is
+    finite, the states at those times (the elements' midpoints) as ``states``."""
     if not len(result.t):
         return result
-    t = result.t - 0.5 * h
+    base = replace(result, t=result.t - 0.5 * h, t_states=h * np.arange(len(result.t) - 1))
     if result.f is None:
-        return replace(result, t=t)
+        return base
     f = np.asarray(result.f, dtype=float)
     if model.m:
         x = np.asarray(result.x, dtype=float)
-        states = State(v=(x[1:] - x[:-1]) / h, x=0.5 * (x[1:] + x[:-1]))
-    else:
-        g = flat_configurations(model, result.g, len(result.t), "solved configurations")
-        middle = _retract(model, g[:-1], f, 0.5 * h)
-        if middle is None:               # a failed solve's last iterate, off every chart
-            return replace(result, t=t)
-        states = State(v=f.copy(), g=model.configurations(middle))
-    return replace(result, t=t, states=states, t_states=h * np.arange(len(f)))
+        return replace(base, states=State(v=(x[1:] - x[:-1]) / h, x=0.5 * (x[1:] + x[:-1])))
+    blocks = result.g if isinstance(result.g, tuple) else (result.g,)
+    g = np.concatenate([np.asarray(b, dtype=float).reshape(len(b), -1) for b in blocks], axis=1)
+    finite = np.isfinite(g).all() and np.isfinite(f).all()
+    middle = _retract(model, g[:-1], f, 0.5 * h) if finite else None
+    if middle is None:               # a failed solve's last iterate, off every chart
+        return base
+    return replace(base, states=State(v=f.copy(), g=model.configurations(middle)))

@@ -62,7 +62,8 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
         result's ``T`` (``t[-1]``) the optimal horizon (:mod:`.horizon`).
     params : parameter overrides (mapping name → value); the others keep the defaults
         compiled in (``INFO["defaults"]``).
-    guess : the free nodes r … N−r in the same layout, or how to interpolate them between
+    guess : the free nodes r … N−r in the same layout (from States: nodes 2 … N − 1 of the
+        N + 2, N − 2 of them), or how to interpolate them between
         the fixed ends: ``"cubic"`` (default) matches the end velocities as well as the
         positions (in τ-coordinates at g_{r−1} on groups, the base points moved along;
         the chord when r = 1, as there are no end velocities), and
@@ -117,6 +118,10 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
     maxiter = arguments.iterations(maxiter)
     check_memory(model, N + from_states)
     if from_states:
+        if isinstance(guess, BVPResult) and guess.t_states is not None \
+                and len(guess.t_states) - 1 != N:
+            raise ValueError(f"guess: a previous result warm-starts a solve with its own "
+                             f"number of steps ({len(guess.t_states) - 1}), not n_steps = {N}")
         nodes = (boundary_states.element_nodes(model, start, h, "start"),
                  boundary_states.element_nodes(model, end, h, "end"))
         result = boundary_states.attach(model, _fixed_horizon(

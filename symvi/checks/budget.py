@@ -27,9 +27,11 @@ class Budget:
     an optional part within it; ``skipped`` names the parts the budget cut."""
 
     def __init__(self, seconds: float | None = DEFAULT_BUDGET):
-        if seconds is not None and not (isinstance(seconds, (int, float)) and seconds > 0):
-            raise ValueError(f"budget must be a positive number of seconds or None, got "
-                             f"{seconds!r}")
+        if seconds is not None and not (isinstance(seconds, (int, float))
+                                        and not isinstance(seconds, bool)
+                                        and 0 < seconds < float("inf")):
+            raise ValueError(f"budget must be a positive, finite number of seconds, or None "
+                             f"for no limit; got {seconds!r}")
         self.seconds = None if seconds is None else float(seconds)
         self.deadline: float | None = None
         self.skipped: list[str] = []

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import re
 from collections import Counter
-from typing import TYPE_CHECKING, Any, Mapping, Sequence
+from typing import TYPE_CHECKING, Any, Mapping
 
 import sympy as sp
 from sympy.core.function import AppliedUndef
@@ -157,6 +157,15 @@ def solve_linear(exprs, unknowns) -> dict:
 
 
 # -- locating differences -----------------------------------------------------------------
+def _majority(ratios: list, ties: bool = False):
+    """The ratio most of ``ratios`` share; None without ratios or, unless ``ties``, when
+    two ratios are shared equally often."""
+    counted = Counter(ratios).most_common(2)
+    if not counted or (not ties and len(counted) == 2 and counted[0][1] == counted[1][1]):
+        return None
+    return counted[0][0]
+
+
 def _split(expr: sp.Expr, variables) -> dict:
     """Variable monomial → its coefficient (free of the variables)."""
     out: dict = {}
@@ -167,32 +176,33 @@ def _split(expr: sp.Expr, variables) -> dict:
 
 
 def _locate(own: sp.Expr, values: dict, derived: sp.Expr, coefficients: set,
-            parameters: set, leading: Sequence = (), scale=None) -> tuple[Any, list[str]]:
+            parameters: set, scale=None) -> tuple[Any, list[str]]:
     """The factor c that matches ``own`` (hand, user's symbols) to ``derived`` (display
     symbols) and the differing terms of own − c·derived, grouped by the parameters they
     carry. ``values`` gives the coefficient symbols' values.
 
     c is ``scale`` when given (a value claims equality: no factor is free). Otherwise the
-    linear part decides (issue 26, item 1): the most common ratio of the terms that are
-    one of the ``leading`` symbols (the jets: derivatives of the fibre coordinates and
-    multipliers) times parameters alone — the terms that fix an equation's normalisation,
-    which a slip in the bracket terms (a wrong lift, a sign in the structure constants:
-    C y η, at least quadratic) does not touch — and only without such terms the most
-    common ratio of all. So a display wrong in most of its terms is not explained by the complement
-    with the opposite sign, and a display multiplied by a factor is still that factor
-    times a right one."""
+    linear part decides (issue 26, item 1): the ratio most of the linear terms (one
+    unknown — a derivative, a multiplier, a control, a base coordinate — times
+    parameters) agree on; those fix an equation's normalisation, and a slip in the
+    bracket terms (a wrong lift, a sign of the structure constants: C y η, at least
+    quadratic) does not touch them. Where the linear terms do not single out one ratio
+    (none, or a tie), the ratio most of all terms agree on. So a display wrong in most
+    of its terms is not explained by the complement with the opposite sign, a display
+    multiplied by a factor is that factor times a right one, and one wrong coefficient
+    of a linear term is that term."""
     variables = [s for s in own.free_symbols | derived.free_symbols
                  if s.name not in coefficients | parameters | {"h"}]
     H_own, D = _split(own, variables), _split(derived, variables)
     H = {m: sp.cancel(a.xreplace(values)) for m, a in H_own.items()}
     H = {m: a for m, a in H.items() if a != 0}
     common = [m for m in H if m in D and D[m] != 0]
-    linear = set(leading)
-    principal = [m for m in common if m in linear]
-    ratios = Counter(sp.cancel(H[m] / D[m]) for m in principal or common)
-    if scale is None and not ratios:
+    if scale is None:
+        scale = _majority([sp.cancel(H[m] / D[m]) for m in common if m.is_Symbol]) \
+            or _majority([sp.cancel(H[m] / D[m]) for m in common], ties=True)
+    if scale is None:
         return None, []
-    c = scale if scale is not None else ratios.most_common(1)[0][0]
+    c = scale
     keyed: dict = {}
 
     def key(coeff):
@@ -316,24 +326,22 @@ class Hand:
                               if s.name in self.space.names})
 
     def linear_mismatch(self, i: int, derived: sp.Expr, c) -> int:
-        """How many linear terms (one of the space's leading symbols times parameters) of
-        hand expression i and c·``derived`` differ: which equation a row is, told by the
-        terms that fix its normalisation (its highest derivatives, its multipliers')."""
+        """How many linear terms (one unknown times parameters) of hand expression i and
+        c·``derived`` differ: which equation a row is, told by the terms that fix its
+        normalisation (its highest derivatives, its multipliers')."""
         own, shown = self.own[i], self.show(derived)
         names = {s.name for s in self.coefficients} | self.parameters | {"h"}
         variables = [s for s in own.free_symbols | shown.free_symbols if s.name not in names]
         H = {m: a.xreplace(self.coefficients) for m, a in _split(own, variables).items()}
         D = _split(shown, variables)
-        linear = {self.show(s) for s in self.space.leading} & (set(H) | set(D))
+        linear = {m for m in set(H) | set(D) if m.is_Symbol}
         return sum(sp.cancel(H.get(m, 0) - c * D.get(m, 0)) != 0 for m in linear)
 
     def locate(self, i: int, derived: sp.Expr, scale=None):
         """(factor c, differing term groups) of hand expression i against ``derived``;
-        c is ``scale`` when given, else fixed by the space's leading symbols
-        (:func:`_locate`)."""
-        leading = [self.show(s) for s in self.space.leading]
+        c is ``scale`` when given, else fixed by the linear terms (:func:`_locate`)."""
         return _locate(self.own[i], self.coefficients, self.show(derived),
-                       {s.name for s in self.coefficients}, self.parameters, leading, scale)
+                       {s.name for s in self.coefficients}, self.parameters, scale)
 
 
 def in_controls(space: Space, exprs) -> list | None:

@@ -42,8 +42,11 @@ def from_system(system, *, name: str, parameters: Mapping[Any, float],
     speeds = _speeds(system, t, name)
     frame, origin = system.frame, system.fixed_point
     kinetic = sum((body.kinetic_energy(frame) for body in system.bodies), sp.S.Zero)
+    # actuators become loads only inside form_eoms: theirs are checked like the others
+    loads = list(system.loads) + [load for actuator in system.actuators
+                                  for load in actuator.to_loads()]
     potential = sum((getattr(body, "potential_energy", 0) for body in system.bodies),
-                    sp.S.Zero) + _load_potential(system.loads, frame, origin, t, name)
+                    sp.S.Zero) + _load_potential(loads, frame, origin, t, name)
     return from_lagrangian((kinetic - potential).xreplace(speeds), coordinates, name=name,
                            parameters=parameters, **options)
 

@@ -2,9 +2,9 @@
 (issue 23, item 3): a turret yawing about the vertical (q1), an upper arm pitching at the
 shoulder (q2) and a forearm pitching at the elbow (q3), the links solid cylinders of
 radius r, under uniform gravity. :func:`symvi.mechanics.from_system` turns the system
-(frames, bodies, ``PinJoint`` s, ``apply_uniform_gravity``) into a model on Q×Q; its
-energy and the vertical angular momentum (q1 is cyclic) are conserved by the discrete
-flow to rounding and O(h²) respectively.
+(frames, bodies, ``PinJoint`` s, ``apply_uniform_gravity``) into a model on Q×Q. The
+discrete flow conserves the vertical angular momentum (q1 is cyclic) to the Newton
+tolerance, and its energy error stays bounded at O(h²): 0.065 at h = 0.005.
 """
 import sympy as sp
 from sympy.physics.mechanics import PinJoint, RigidBody, System, dynamicsymbols, inertia
