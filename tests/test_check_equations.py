@@ -307,6 +307,7 @@ def test_rows_are_paired_with_derived_equations_one_to_one():
     so the second equation's differences are told against a row of their own. A row
     no factor relates to any equation stays unpaired."""
     from symvi.checks.equations import _pairing
+    from symvi.checks.equivalence import Located
 
     groups = {(0, 0): ["a"], (0, 1): ["b", "c", "d"], (1, 0): [], (1, 1): ["e"] * 5}
 
@@ -315,11 +316,7 @@ def test_rows_are_paired_with_derived_equations_one_to_one():
 
         @staticmethod
         def locate(i, j):
-            return (None, None) if i == 2 else (1, groups[i, j])
-
-        @staticmethod
-        def linear_mismatch(i, j, c):
-            return 0
+            return Located(None, []) if i == 2 else Located(1, groups[i, j])
     pairing = _pairing(Fake, [0, 1])
     assert [p[0] for p in pairing[:2]] == [1, 0] and pairing[2] is None
 

@@ -147,19 +147,7 @@ class _Result:
         Written atomically: the archive appears whole or not at all."""
         arrays = {}
         for field in fields(self):
-            value = getattr(self, field.name)
-            if value is None:
-                continue
-            if isinstance(value, Status):
-                arrays[field.name] = np.array(value.name)
-            elif isinstance(value, State):
-                arrays.update(_state_arrays(field.name, value))
-            elif isinstance(value, dict):
-                arrays.update({f"{field.name}_{k}": np.asarray(v) for k, v in value.items()})
-            elif isinstance(value, tuple) and value and isinstance(value[0], np.ndarray):
-                arrays.update({f"{field.name}_{i}": v for i, v in enumerate(value)})
-            else:
-                arrays[field.name] = np.asarray(value)
+            arrays.update(_entries(field.name, getattr(self, field.name)))
         write_npz(file, arrays)
 
     def __reduce__(self):
@@ -494,17 +482,22 @@ class BVPBatch(_Result):
         return f"<BVPBatch {self.status.name}: {self.message[:100]!r}; {len(self)} solves>"
 
 
-def _state_arrays(name: str, state: State) -> dict:
-    """A State of arrays as archive entries ``states_v``, ``states_x``, ``states_g`` (or
-    ``states_g_0``, … with several group factors)."""
-    arrays = {}
-    for part in ("v", "x", "g"):
-        value = getattr(state, part)
-        if isinstance(value, tuple):
-            arrays.update({f"{name}_{part}_{i}": v for i, v in enumerate(value)})
-        elif value is not None:
-            arrays[f"{name}_{part}"] = np.asarray(value)
-    return arrays
+def _entries(name: str, value) -> dict:
+    """``value`` as archive entries under ``name``: none for None, a status by its name,
+    the parts of a dict or a State as ``name_part`` (``states_v``, ``history_mu``),
+    several arrays as ``name_0``, ``name_1``, …, anything else as one array."""
+    if value is None:
+        return {}
+    if isinstance(value, Status):
+        return {name: np.array(value.name)}
+    if isinstance(value, State):
+        value = {part: getattr(value, part) for part in ("v", "x", "g")}
+    if isinstance(value, dict):
+        return {k: v for part, item in value.items() for k, v in
+                _entries(f"{name}_{part}", item).items()}
+    if isinstance(value, tuple) and value and isinstance(value[0], np.ndarray):
+        return {f"{name}_{i}": v for i, v in enumerate(value)}
+    return {name: np.asarray(value)}
 
 
 def write_npz(file: str | os.PathLike, arrays: dict) -> None:

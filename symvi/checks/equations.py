@@ -196,10 +196,9 @@ def _compare_values(hand: Hand, derived: list, spec: HandDerived):
         if note is None and spec.target == "target_map":
             note = limit_note(hand, H, D)
         if note is None:
-            c, groups = hand.locate(i, D, scale=1)     # a value has no free factor
-            factor = ""
-            note = "differs" + factor + ": " + ("; ".join(groups) if groups else
-                                                f"hand − derived = {show(hand.show(H - D))}")
+            groups = hand.locate(i, D, scale=1).groups     # a value has no free factor
+            note = "differs: " + ("; ".join(groups) if groups else
+                                  f"hand − derived = {show(hand.show(H - D))}")
         results.append(EquationResult(label, False, note))
     return results
 
@@ -218,26 +217,25 @@ def _pairing(hand: Hand, derived: list) -> list:
     located = [[hand.locate(i, D) for D in derived] for i in range(len(hand.math))]
     if not located or not derived:
         return [None] * len(located)
-    cost = np.array([[_UNPAIRED if c is None else
-                      _LINEAR * hand.linear_mismatch(i, derived[j], c) + len(groups)
-                      + _OFF_DIAGONAL * (i != j)
-                      for j, (c, groups) in enumerate(row)] for i, row in enumerate(located)])
+    cost = np.array([[_UNPAIRED if at.scale is None else
+                      _LINEAR * at.linear + len(at.groups) + _OFF_DIAGONAL * (i != j)
+                      for j, at in enumerate(row)] for i, row in enumerate(located)])
     rows, columns = linear_sum_assignment(cost)
     pairing = [None] * len(located)
     for i, j in zip(rows, columns):
-        if located[i][j][0] is not None:
-            pairing[i] = (j, *located[i][j])
+        if located[i][j].scale is not None:
+            pairing[i] = (j, located[i][j].scale, located[i][j].groups)
     for i, row in enumerate(located):
         if pairing[i] is None and cost[i].min() < _UNPAIRED:
             j = int(np.argmin(cost[i]))
-            pairing[i] = (j, *row[j])
+            pairing[i] = (j, row[j].scale, row[j].groups)
     return pairing
 
 
 #: The cost of pairing a row with an equation no factor relates it to, of each linear term
-#: (a highest derivative, a multiplier's) the pair does not share — which equation a row
-#: is comes first, how many groups of its other terms differ second — and the tie-break
-#: toward a row's own index.
+#: (one unknown times parameters) the pair does not share — which equation a row is comes
+#: first, how many groups of its other terms differ second — and the tie-break toward a
+#: row's own index.
 _UNPAIRED, _LINEAR, _OFF_DIAGONAL = 1e6, 100.0, 1e-3
 
 

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import re
 from collections import Counter
-from typing import TYPE_CHECKING, Any, Mapping
+from typing import TYPE_CHECKING, Any, Mapping, NamedTuple
 
 import sympy as sp
 from sympy.core.function import AppliedUndef
@@ -175,11 +175,22 @@ def _split(expr: sp.Expr, variables) -> dict:
     return out
 
 
+class Located(NamedTuple):
+    """Where a hand expression differs from a derived one (:func:`_locate`): the factor c
+    (None: no factor relates them), the groups of differing terms of own − c·derived,
+    and how many of them are linear terms (one unknown times parameters)."""
+
+    scale: Any
+    groups: list
+    linear: int = 0
+
+
 def _locate(own: sp.Expr, values: dict, derived: sp.Expr, coefficients: set,
-            parameters: set, scale=None) -> tuple[Any, list[str]]:
+            parameters: set, scale=None) -> Located:
     """The factor c that matches ``own`` (hand, user's symbols) to ``derived`` (display
     symbols) and the differing terms of own − c·derived, grouped by the parameters they
-    carry. ``values`` gives the coefficient symbols' values.
+    carry, with the count of differing linear terms (how :func:`.equations._pairing`
+    tells which equation a row is). ``values`` gives the coefficient symbols' values.
 
     c is ``scale`` when given (a value claims equality: no factor is free). Otherwise the
     linear part decides (issue 26, item 1): the ratio most of the linear terms (one
@@ -201,8 +212,8 @@ def _locate(own: sp.Expr, values: dict, derived: sp.Expr, coefficients: set,
         scale = _majority([sp.cancel(H[m] / D[m]) for m in common if m.is_Symbol]) \
             or _majority([sp.cancel(H[m] / D[m]) for m in common], ties=True)
     if scale is None:
-        return None, []
-    c = scale
+        return Located(None, [])
+    c, linear = scale, 0
     keyed: dict = {}
 
     def key(coeff):
@@ -220,6 +231,7 @@ def _locate(own: sp.Expr, values: dict, derived: sp.Expr, coefficients: set,
         a, b = H.get(m, sp.S.Zero), sp.cancel(c * D.get(m, sp.S.Zero))
         if sp.cancel(a - b) == 0:
             continue
+        linear += m.is_Symbol
         own_term = H_own.get(m, sp.S.Zero) * m
         if a != 0 and b != 0:
             A, B = sp.Add.make_args(sp.expand(a)), sp.Add.make_args(sp.expand(b))
@@ -239,7 +251,7 @@ def _locate(own: sp.Expr, values: dict, derived: sp.Expr, coefficients: set,
     messages = [_describe(*group, coefficients, values) for group in keyed.values()]
     if len(messages) > _MAX_GROUPS:
         messages = messages[:_MAX_GROUPS] + [f"… and {len(messages) - _MAX_GROUPS} more"]
-    return c, messages
+    return Located(c, messages, linear)
 
 
 def _describe(hand_own, hand_value, derived_part, wholes, coefficients: set,
@@ -325,21 +337,9 @@ class Hand:
         return expr.xreplace({s: self.space.names[s.name] for s in expr.free_symbols
                               if s.name in self.space.names})
 
-    def linear_mismatch(self, i: int, derived: sp.Expr, c) -> int:
-        """How many linear terms (one unknown times parameters) of hand expression i and
-        c·``derived`` differ: which equation a row is, told by the terms that fix its
-        normalisation (its highest derivatives, its multipliers')."""
-        own, shown = self.own[i], self.show(derived)
-        names = {s.name for s in self.coefficients} | self.parameters | {"h"}
-        variables = [s for s in own.free_symbols | shown.free_symbols if s.name not in names]
-        H = {m: a.xreplace(self.coefficients) for m, a in _split(own, variables).items()}
-        D = _split(shown, variables)
-        linear = {m for m in set(H) | set(D) if m.is_Symbol}
-        return sum(sp.cancel(H.get(m, 0) - c * D.get(m, 0)) != 0 for m in linear)
-
-    def locate(self, i: int, derived: sp.Expr, scale=None):
-        """(factor c, differing term groups) of hand expression i against ``derived``;
-        c is ``scale`` when given, else fixed by the linear terms (:func:`_locate`)."""
+    def locate(self, i: int, derived: sp.Expr, scale=None) -> Located:
+        """Where hand expression i differs from ``derived``: at the factor ``scale`` when
+        given, else the one the linear terms fix (:func:`_locate`)."""
         return _locate(self.own[i], self.coefficients, self.show(derived),
                        {s.name for s in self.coefficients}, self.parameters, scale)
 

@@ -155,8 +155,7 @@ def _euler_lagrange_space(model, params: dict, fixed: dict) -> Space:
     eqs = continuous_equations(model)
     symbols = list(eqs.symbols.values())
     return Space(list(eqs.equations), eqs.symbols | params, symbols,
-                 {s: s for s in symbols}, list(eqs.leading), leading=list(eqs.leading),
-                 fixed=fixed, convert=eqs.named)
+                 {s: s for s in symbols}, list(eqs.leading), fixed=fixed, convert=eqs.named)
 
 
 def _residual_window(model, discrete, derived) -> tuple[list, dict, list, list]:
