@@ -56,8 +56,11 @@ COMPILE_ARGS = ["-O3", "-std=c99", "-fno-math-errno", "-g0"]
 #: 240 kB 8.8 → 6.7, loop as fast; the 20-link chain's 780 kB 35 → 27 (register
 #: allocation a third of it). Large models are compiled more often than their loops are
 #: timed. The same arithmetic either way: no -ffast-math, so NaN checks keep working.
+#: Superword vectorisation is off for them: on straight-line kernels it finds little and
+#: costs much (20-link chain, kernels split by ``codegen/schedule.py``: 11.5 s and 400 MB
+#: with it, 9.1 s and 280 MB without; the 10-link chain's loop is as fast).
 LARGE_SOURCE = 150_000
-LARGE_SOURCE_ARGS = ["-O2", *COMPILE_ARGS[1:]]
+LARGE_SOURCE_ARGS = ["-O2", "-fno-tree-slp-vectorize", *COMPILE_ARGS[1:]]
 
 
 def compile_args(c_source: str) -> list[str]:

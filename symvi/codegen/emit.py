@@ -19,6 +19,7 @@ from ..version import __version__
 from ..derivation.derive import DerivedModel, Kernel
 from ..errors import ModelError
 from ..groupoids.analytic import THETA, AnalyticCoefficient, c_definition
+from .schedule import SPLIT_ABOVE, Statement, on_demand, split
 
 
 class ArrayPrinter(C99CodePrinter):
@@ -95,28 +96,35 @@ def _render_kernel(kernel: Kernel, dm: DerivedModel) -> dict:
     names |= {s: f"d{i}" for i, (s, _) in enumerate(kernel.definitions)}
     names[dm.step] = "h"
     printer = ArrayPrinter(names)
+    local: dict[sp.Symbol, str] = {}     # the temporaries' symbols and C names
+
+    def statement(target: str, expr: sp.Expr, temporary: bool) -> Statement:
+        uses = tuple(sorted(local[s] for s in expr.free_symbols if s in local))
+        return Statement(target, printer.doprint(expr), temporary, uses)
+
     temporaries = []
     # Definitions first, one CSE per dependency level, so that every temporary is
     # computed after the definitions it uses.
     for k, group in enumerate(_levels(kernel.definitions)):
         shared, reduced = sp.cse([e for _, e in group], symbols=sp.numbered_symbols(f"u{k}_"),
                                  order="none")
-        temporaries += [{"name": str(t), "code": printer.doprint(e)} for t, e in shared]
-        temporaries += [{"name": names[sym], "code": printer.doprint(e)}
-                        for (sym, _), e in zip(group, reduced)]
+        for t, e in shared:
+            temporaries.append(statement(str(t), e, True))
+            local[t] = str(t)
+        for (sym, _), e in zip(group, reduced):
+            temporaries.append(statement(names[sym], e, True))
+            local[sym] = names[sym]
     flat = [e for _, M in kernel.outputs for e in M]
     shared, reduced = sp.cse(flat, symbols=sp.numbered_symbols("t"), order="none")
-    temporaries += [{"name": str(t), "code": printer.doprint(e)} for t, e in shared]
-    position = 0
-    outputs = []
-    for out_name, M in kernel.outputs:
-        lines = []
-        for i in range(len(M)):
-            lines.append(f"{out_name}[{i}] = {printer.doprint(reduced[position])};")
-            position += 1
-        outputs.append({"name": out_name, "size": len(M), "assignments": lines})
+    for t, e in shared:
+        temporaries.append(statement(str(t), e, True))
+        local[t] = str(t)
+    targets = [f"{name}[{i}]" for name, M in kernel.outputs for i in range(len(M))]
+    code = on_demand(temporaries, [statement(t, e, False) for t, e in zip(targets, reduced)])
+    parts, work = split(code) if len(code) > SPLIT_ABOVE else ([], 0)
     return {"name": kernel.name, "doc": kernel.doc, "nz": len(kernel.z), "along": kernel.along,
-            "temporaries": temporaries, "outputs": outputs}
+            "statements": code, "parts": parts, "work": work,
+            "outputs": [{"name": name, "size": len(M)} for name, M in kernel.outputs]}
 
 
 def _printed(render, kernel: Kernel, dm: DerivedModel) -> dict:
