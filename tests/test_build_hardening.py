@@ -423,8 +423,8 @@ SLOW_SOURCE = textwrap.dedent("""
     from symvi import Model, PairGroupoid
     G = PairGroupoid("x y")
     (x, y), (u, v) = G.q, G.qdot
-    # An expanded degree-40 polynomial: its derivation takes over 8 s.
-    model = Model("slow", G, lagrangian=(u**2 + v**2) / 2 - sp.expand((1 + x + y)**40))
+    # An expanded degree-70 polynomial: its derivation takes over 7 s.
+    model = Model("slow", G, lagrangian=(u**2 + v**2) / 2 - sp.expand((1 + x + y)**70))
 """)
 
 
@@ -434,7 +434,7 @@ def test_timeout_names_the_running_stage(tmp_path, capsys, monkeypatch):
     monkeypatch.setattr(symvi.build.stages, "SLOW_STAGE", 0.3)
     handler = signal.getsignal(signal.SIGALRM)
     start = time.monotonic()
-    # 3 s of a derivation over 8 s: with degree 20 (1.8 s) and a timeout of 1 s, the stage
+    # 3 s of a derivation over 7 s: with degree 20 (1.8 s) and a timeout of 1 s, the stage
     # running at the timeout depended on the machine's load
     code = main(["compile", str(model_file), "-o", str(tmp_path / "out"), "--timeout", "3"])
     elapsed = time.monotonic() - start

@@ -1,10 +1,12 @@
-"""Large kernels are ordered and split into parts (``symvi/codegen/schedule.py``) without
+"""Large kernels are ordered, split into parts (``symvi/codegen/schedule.py``) and
+compiled as translation units of their own (``symvi/build/_cffi_build.py``) without
 changing one operation: the split C gives the same bits as the unsplit C.
 
 Two tests. The work array's bookkeeping is checked by executing random statement graphs
 part by part against a store that records which value each slot holds; and a model
-compiled with every kernel split into parts of a few statements is compared bit for bit
-with the same model compiled whole (every kernel at random points, and a run).
+compiled with every kernel in a unit of its own, split into parts of a few statements, is
+compared bit for bit with the same model compiled whole (every kernel at random points,
+and a run).
 """
 from __future__ import annotations
 
@@ -68,10 +70,13 @@ def whole_and_split(tmp_path_factory):
     whole = compile_model(model, tmp_path_factory.mktemp("whole"), force=True)
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(emit_module, "SPLIT_ABOVE", 0)
+        patch.setattr(emit_module, "UNIT_ABOVE", 0)
         patch.setattr(schedule, "PART", 5)
         parts = compile_model(model, tmp_path_factory.mktemp("parts"), force=True)
-        source = emit_module.emit(derive(discretise(model))).c_source
-    assert source.count("SYMVI_PART k_") > 40     # every kernel in parts of 5
+        source = emit_module.emit(derive(discretise(model)))
+    # every kernel in a translation unit of its own, in parts of 5 statements
+    assert [name for name, _ in source.units] == list(whole.INFO["kernels"])
+    assert sum(text.count("SYMVI_PART k_") for _, text in source.units) > 40
     return model, whole, parts
 
 

@@ -25,3 +25,24 @@ def test_the_path_alone_is_the_same_path(compiled, name, initial):
     np.testing.assert_array_equal(thinned.x, full.x[::100])
     with pytest.raises(TypeError, match="quantities must be True or False"):
         mod.integrate(initial, 10, 0.005, quantities="no")
+
+
+def test_the_memory_check_counts_what_is_stored(compiled, monkeypatch):
+    """A run that fits without its momenta and energies is not refused for them: with
+    memory for 1.2 paths, the full run (1.57 paths: momentum and energy per node) is
+    refused before anything is allocated and the path alone runs."""
+    import importlib
+    mod = compiled("pendulum")
+    memory = importlib.import_module(f"{mod.__name__}._runtime.memory")
+    storage = importlib.import_module(f"{mod.__name__}._runtime.storage")
+    n_steps = 3_000_000
+    path_bytes = storage.bytes_per_node(mod.model, quantities=False) * (n_steps + 1)
+    assert path_bytes > memory.SMALL
+    assert storage.bytes_per_node(mod.model) > 1.5 * storage.bytes_per_node(
+        mod.model, quantities=False)
+    for module in (memory, storage):
+        monkeypatch.setattr(module, "available_bytes", lambda: 1.2 * path_bytes)
+    with pytest.raises(MemoryError, match="3,000,001 nodes"):
+        mod.integrate([[1.0], [1.01]], n_steps, 0.01)
+    alone = mod.integrate([[1.0], [1.01]], n_steps, 0.01, quantities=False)
+    assert alone.success and alone.x.shape == (n_steps + 1, 1)

@@ -56,7 +56,7 @@ def first_fibres(model, X: np.ndarray, V: np.ndarray, H: np.ndarray,
     steps H (c,), parameter rows P (c, np)): Newton on all of them together, each state's
     iterates the same as alone (it stops when its own correction is small);
     :class:`TransformError` names the first state that fails."""
-    c, m, n = len(X), model.m, model.n
+    c, n = len(X), model.n
     P = np.ascontiguousarray(P)
     momentum = _points(model, "legendre", np.hstack([X, V]), P, H)[0]
     F = X + H[:, None] * V if model.info["node_pairs"] else V.copy()
@@ -64,7 +64,7 @@ def first_fibres(model, X: np.ndarray, V: np.ndarray, H: np.ndarray,
     for _ in range(MAXITER):
         value, jacobian = _points(model, "momentum_minus", np.hstack([X[active], F[active]]),
                                   P[active], H[active])
-        J = jacobian.reshape(len(active), n, m + n)[:, :, m:]
+        J = jacobian.reshape(len(active), n, n)
         delta = _solve(J, momentum[active] - value, active, H)
         F[active] = F[active] + delta
         bad = ~np.isfinite(F[active]).all(axis=1)

@@ -66,19 +66,22 @@ class Series:
         return self.values[: self.kept(total)]
 
 
-def bytes_per_node(model) -> int:
-    """Bytes stored per kept node: base point, fibre, configuration, momenta (r·n at
-    second order), energy, conserved quantities, time and the Newton iterations."""
+def bytes_per_node(model, quantities: bool = True) -> int:
+    """Bytes stored per kept node: base point, fibre, configuration, time and the Newton
+    iterations and, with ``quantities``, the momenta (r·n at second order), energy and
+    conserved quantities."""
     info = model.info
-    doubles = (model.m + model.n + info["configuration_dim"] + model.order * model.n
-               + int(info["has_energy"]) + len(info.get("symmetries") or ()) + 1)
-    return 8 * doubles + 4
+    derived = (model.order * model.n + int(info["has_energy"])
+               + len(info.get("symmetries") or ())) if quantities else 0
+    return 8 * (model.m + model.n + info["configuration_dim"] + 1 + derived) + 4
 
 
-def check_memory(model, elements: int, keep: int, buffered: int) -> None:
-    """Refuse a run whose stored path would not fit in memory, before allocating it."""
+def check_memory(model, elements: int, keep: int, buffered: int,
+                 quantities: bool = True) -> None:
+    """Refuse a run whose stored path (with its ``quantities`` or without) would not fit
+    in memory, before allocating it."""
     nodes = elements // keep + 1
-    per_node = float(bytes_per_node(model))
+    per_node = float(bytes_per_node(model, quantities))
     needed = per_node * (nodes + buffered)
     if needed < SMALL:
         return

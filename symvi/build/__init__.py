@@ -63,10 +63,10 @@ LARGE_SOURCE = 150_000
 LARGE_SOURCE_ARGS = ["-O2", "-fno-tree-slp-vectorize", *COMPILE_ARGS[1:]]
 
 
-def compile_args(c_source: str) -> list[str]:
-    """The flags of the C compile of ``c_source`` (:data:`COMPILE_ARGS`, or
-    :data:`LARGE_SOURCE_ARGS` above :data:`LARGE_SOURCE` characters)."""
-    return LARGE_SOURCE_ARGS if len(c_source) > LARGE_SOURCE else COMPILE_ARGS
+def compile_args(src: CSource) -> list[str]:
+    """The flags of the C compile of ``src`` (:data:`COMPILE_ARGS`, or
+    :data:`LARGE_SOURCE_ARGS` above :data:`LARGE_SOURCE` characters in all its units)."""
+    return LARGE_SOURCE_ARGS if src.size > LARGE_SOURCE else COMPILE_ARGS
 
 _LOAD_LOCK = threading.RLock()
 
@@ -256,7 +256,8 @@ def _compile(src: CSource, key: str, workdir: Path, clock: StageClock, verbose: 
     with writing(workdir, "create"):
         workdir.mkdir()
     try:
-        return compile_extension(src.cdef, src.c_source, f"_ext_{key[:16]}", workdir,
-                                 compile_args(src.c_source), clock.remaining(), verbose)
+        return compile_extension(src.cdef, (("model", src.c_source), *src.units),
+                                 f"_ext_{key[:16]}", workdir, compile_args(src), clock.remaining(),
+                                 verbose)
     except CompileTimeout:
         raise Expired() from None

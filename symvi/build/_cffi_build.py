@@ -6,9 +6,9 @@ neither can disturb the caller's threads. Usage::
 
     python _cffi_build.py SPEC.json
 
-SPEC names the module, the files holding the cdef and the C source, the compile
-arguments and libraries, the build folder and the file to write the built extension's
-path into. Imports only the standard library and cffi (the script is run by path, not
+SPEC names the module, the file holding the cdef, the translation units (C files,
+compiled in parallel), the compile arguments and libraries, the build folder and the file
+to write the built extension's path into. Imports only the standard library and cffi (the script is run by path, not
 as part of the symvi package, so that SymPy is never imported).
 """
 import json
@@ -32,14 +32,51 @@ def _die_with_parent() -> None:
     os.killpg(os.getpgrp(), signal.SIGKILL)
 
 
+def compile_units(units: list[str], args: list[str], folder: str) -> list[str]:
+    """Compile the translation units ``units`` (paths of C files) to object files in
+    ``folder``, as many at once as this process may use cores, with the compiler and flags
+    cffi's build uses (distutils' compiler for this Python, customised as ``build_ext``
+    does); the object files, in the order of ``units``."""
+    import setuptools  # noqa: F401  (first: its distutils, as cffi does)
+    from concurrent.futures import ThreadPoolExecutor
+    from distutils.ccompiler import new_compiler
+    from distutils.sysconfig import customize_compiler
+
+    def compiler():
+        # here, not in the threads: distutils reads the configuration variables into a
+        # cache that concurrent first readers see half filled
+        made = new_compiler()
+        customize_compiler(made)
+        return made
+
+    def one(job) -> str:
+        path, made = job
+        return made.compile([path], output_dir=folder, extra_postargs=args)[0]
+
+    cores = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    largest_first = sorted(units, key=os.path.getsize, reverse=True)
+    jobs = [(path, compiler()) for path in largest_first]
+    with ThreadPoolExecutor(max_workers=max(1, cores or 1)) as pool:
+        built = dict(zip(largest_first, pool.map(one, jobs)))
+    return [built[path] for path in units]
+
+
 def main(spec_path: str) -> None:
     with open(spec_path) as handle:
         spec = json.load(handle)
-    with open(spec["cdef"]) as cdef, open(spec["source"]) as source:
-        ffi = cffi.FFI()
-        ffi.cdef(cdef.read())
-        ffi.set_source(spec["module"], source.read(), extra_compile_args=spec["args"],
-                       libraries=spec["libraries"])
+    with open(spec["cdef"]) as cdef:
+        declarations = cdef.read()
+    units, objects = spec["units"], []
+    if len(units) == 1:     # one unit: it is the extension's own, with cffi's wrappers
+        with open(units[0]) as source:
+            own = source.read()
+    else:                   # several: compiled side by side, the wrappers in a unit of
+        objects = compile_units(units, spec["args"], os.path.join(spec["tmpdir"], "units"))
+        own = declarations  # their own (the prototypes of the functions they call)
+    ffi = cffi.FFI()
+    ffi.cdef(declarations)
+    ffi.set_source(spec["module"], own, extra_compile_args=spec["args"],
+                   libraries=spec["libraries"], extra_objects=objects)
     built = ffi.compile(tmpdir=spec["tmpdir"], verbose=spec["verbose"])
     with open(spec["result"], "w") as handle:
         handle.write(built)

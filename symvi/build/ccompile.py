@@ -13,6 +13,7 @@ import signal
 import subprocess
 import sys
 from pathlib import Path
+from typing import Sequence
 
 from ..errors import BuildError
 from .files import write_file
@@ -28,10 +29,14 @@ class CompileTimeout(Exception):
     """The compiler was still running at the deadline (it has been killed)."""
 
 
-def compile_extension(cdef: str, c_source: str, module: str, workdir: Path,
-                      args: list[str], timeout: float | None = None,
+def compile_extension(cdef: str, units: Sequence[tuple[str, str]], module: str,
+                      workdir: Path, args: list[str], timeout: float | None = None,
                       verbose: bool = False) -> Path:
     """Build the cffi extension ``module`` in ``workdir``; return its path.
+
+    ``units`` are the translation units, (name, C text), compiled in parallel; ``cdef``
+    declares the functions they export (it is also the C of the extension's own unit,
+    which holds cffi's wrappers).
 
     Raises :class:`BuildError` with the compiler's output if compilation fails and
     :class:`CompileTimeout` if it runs longer than ``timeout`` seconds.
@@ -40,7 +45,7 @@ def compile_extension(cdef: str, c_source: str, module: str, workdir: Path,
         raise BuildError("cannot run the C compile: the path of the Python interpreter "
                          "(sys.executable) is unknown")
     workdir = Path(workdir).absolute()     # the child runs in it: relative paths would break
-    spec = _write_inputs(cdef, c_source, module, workdir, args, verbose)
+    spec = _write_inputs(cdef, units, module, workdir, args, verbose)
     returncode, output = _run_child([sys.executable, "-c", _BOOTSTRAP, str(_CHILD), str(spec)],
                                     workdir, timeout)
     if verbose and output:
@@ -52,14 +57,17 @@ def compile_extension(cdef: str, c_source: str, module: str, workdir: Path,
     return Path(result.read_text())
 
 
-def _write_inputs(cdef: str, c_source: str, module: str, workdir: Path, args: list[str],
-                  verbose: bool) -> Path:
-    files = {"cdef": workdir / "cdef.h", "source": workdir / f"{module}.source.c"}
-    write_file(files["cdef"], cdef)
-    write_file(files["source"], c_source)
+def _write_inputs(cdef: str, units: Sequence[tuple[str, str]], module: str, workdir: Path,
+                  args: list[str], verbose: bool) -> Path:
+    cdef_path = workdir / "cdef.h"
+    write_file(cdef_path, cdef)
+    paths = []
+    for name, text in units:
+        paths.append(workdir / f"{module}_{name}.c")
+        write_file(paths[-1], text)
     spec = {"module": module, "args": list(args), "libraries": ["m"], "verbose": verbose,
             "tmpdir": str(workdir / "build"), "result": str(workdir / "built.txt"),
-            **{k: str(v) for k, v in files.items()}}
+            "cdef": str(cdef_path), "units": [str(p) for p in paths]}
     path = workdir / "spec.json"
     write_file(path, json.dumps(spec))
     return path

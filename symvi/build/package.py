@@ -112,6 +112,8 @@ def write_package(folder: Path, dm: DerivedModel, src: CSource, key: str, descri
         extension = built.read_bytes()
     write_file(folder / built.name, extension)
     write_file(folder / f"{dm.name}.c", src.c_source)
+    for name, text in src.units:
+        write_file(folder / f"{dm.name}_{name}.c", text)
     for path in runtime_files():
         write_file(folder / "_runtime" / path.name, path.read_bytes())
     imported = {rel: record["sha256"] for rel, record in file_records(folder).items()

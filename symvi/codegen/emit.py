@@ -21,6 +21,11 @@ from ..errors import ModelError
 from ..groupoids.analytic import THETA, AnalyticCoefficient, c_definition
 from .schedule import SPLIT_ABOVE, Statement, on_demand, split
 
+#: Kernels of more statements than this are compiled as translation units of their own,
+#: in parallel with the model's (:mod:`symvi.build.ccompile`); smaller ones stay with the
+#: step loop that inlines them.
+UNIT_ABOVE = 400
+
 
 class ArrayPrinter(C99CodePrinter):
     """C99 printer that maps symbols to array slots and expands small integer powers."""
@@ -53,11 +58,23 @@ class ArrayPrinter(C99CodePrinter):
 
 @dataclass(frozen=True)
 class CSource:
-    """The emitted sources of one model: C body, cffi cdef and a digest of both."""
+    """The emitted sources of one model and a digest of them all.
+
+    ``c_source`` is the model's translation unit (the runtime, the small kernels);
+    ``units`` the kernels of more than :data:`UNIT_ABOVE` statements, each a translation
+    unit of its own, as (name, C text), compiled in parallel; ``cdef`` the cffi
+    declarations of every exported function (C prototypes).
+    """
 
     c_source: str
     cdef: str
     digest: str
+    units: tuple[tuple[str, str], ...] = ()
+
+    @property
+    def size(self) -> int:
+        """Characters of C in all units."""
+        return len(self.c_source) + sum(len(text) for _, text in self.units)
 
 
 def template_dir() -> Path:
@@ -123,7 +140,7 @@ def _render_kernel(kernel: Kernel, dm: DerivedModel) -> dict:
     code = on_demand(temporaries, [statement(t, e, False) for t, e in zip(targets, reduced)])
     parts, work = split(code) if len(code) > SPLIT_ABOVE else ([], 0)
     return {"name": kernel.name, "doc": kernel.doc, "nz": len(kernel.z), "along": kernel.along,
-            "statements": code, "parts": parts, "work": work,
+            "statements": code, "parts": parts, "work": work, "unit": len(code) > UNIT_ABOVE,
             "outputs": [{"name": name, "size": len(M)} for name, M in kernel.outputs]}
 
 
@@ -144,6 +161,7 @@ def emit(dm: DerivedModel) -> CSource:
     env = environment()
     context = {
         "version": __version__, "name": dm.name, "m": dm.source_dim, "n": dm.fibre_dim,
+        "unit_note": "The model's unit: its runtime and small kernels.",
         "K": dm.stencil_elements, "order": dm.order, "np": len(dm.parameters),
         "kernels": [_printed(_render_kernel, k, dm) for k in dm.kernels],
         "whole_trajectory": dm.whole_trajectory, "constraints": dm.constraint_count,
@@ -157,8 +175,13 @@ def emit(dm: DerivedModel) -> CSource:
     }
     c_source = env.get_template("module.c.j2").render(**context)
     cdef = env.get_template("cdef.h.j2").render(**context)
-    digest = hashlib.sha256((c_source + cdef).encode()).hexdigest()
-    return CSource(c_source, cdef, digest)
+    unit = env.get_template("unit.c.j2")
+    units = tuple((k["name"], unit.render(context | {
+        "k": k, "unit_note": f"Kernel {k['name']}, a unit of its own."}))
+        for k in context["kernels"] if k["unit"])
+    digest = hashlib.sha256("\0".join([c_source, cdef, *(t for u in units for t in u)])
+                            .encode()).hexdigest()
+    return CSource(c_source, cdef, digest, units)
 
 
 def _with_configuration_offsets(groups: list[dict]) -> list[dict]:

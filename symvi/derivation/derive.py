@@ -125,11 +125,15 @@ class _Stencil:
     #: (constrained models; the last coordinates of z).
     multipliers: tuple[tuple[sp.Symbol, ...], ...] = ()
 
-    def total_jacobian(self, R: sp.Matrix) -> sp.Matrix:
-        """dR/dz, with the chain rule through the named base points."""
+    def total_jacobian(self, R: sp.Matrix, wrt: Sequence[sp.Symbol] | None = None) -> sp.Matrix:
+        """dR/dz, or dR/d(wrt) for ``wrt`` a part of z, with the chain rule through the
+        named base points."""
+        wrt = self.z if wrt is None else tuple(wrt)
+        columns = [self.z.index(s) for s in wrt]
         named = {s for s, _ in self.definitions}
-        return jacobian(R, self.z, [(x, D) for x, D in zip(self.xs[1:], self.source_jacobians[1:])
-                                    if x and x[0] in named])
+        return jacobian(R, wrt, [(x, D.extract(list(range(D.rows)), columns))
+                                 for x, D in zip(self.xs[1:], self.source_jacobians[1:])
+                                 if x and x[0] in named])
 
 
 def _on_element(dm: DiscreteModel, st: _Stencil, element: int) -> dict:
@@ -561,9 +565,9 @@ def _step_kernels(dm: DiscreteModel, engine: _Engine, full: _Stencil,
                "F⁺L_d: momenta at the last r nodes from the 2r−1 elements before them",
                half.definitions),
         Kernel("momentum_minus", half.z, (("momentum", p_minus),)
-               + ((("jacobian", half.total_jacobian(p_minus)),) if r == 1 else ()),
+               + ((("jacobian", half.total_jacobian(p_minus, half.fs[0])),) if r == 1 else ()),
                "F⁻L_d: momenta at the first r nodes from the 2r−1 elements after them "
-               "(first order: and ∂/∂z, for the discrete Legendre transform of a state)",
+               "(first order: and ∂/∂f₀, for the discrete Legendre transform of a state)",
                half.definitions + (half.jacobian_definitions if r == 1 else ())),
     ] + _legendre(dm, r)
 

@@ -29,6 +29,7 @@ import symengine as se
 import sympy as sp
 
 from ..groupoids.analytic import AnalyticCoefficient, derivative
+from .translate import distinct_nodes, to_engine, to_sympy, translatable as _translatable
 
 #: What SymEngine raises for an expression it cannot translate or differentiate.
 _UNTRANSLATABLE = (RuntimeError, TypeError, NotImplementedError)
@@ -52,6 +53,9 @@ class _Translation:
         self.stand_ins: dict[sp.Basic, "_StandIn"] = {}
         #: name of the stand-in of c(s) -> (the class of c, s in SymEngine)
         self.applications: dict[str, tuple[type, object]] = {}
+        #: translations of the distinct subexpressions met so far, each way
+        self._engine_memo: dict = {}
+        self._sympy_memo: dict = {}
 
     def stand_in(self, atom: sp.Basic) -> "_StandIn":
         if atom not in self.stand_ins:
@@ -62,15 +66,29 @@ class _Translation:
 
     def engine(self, M: sp.Matrix):
         """M as a SymEngine matrix in stand-ins."""
-        mapping = {}
-        for c in M.atoms(AnalyticCoefficient):
-            w = self.stand_in(c)
+        return se.Matrix(M.rows, M.cols, [to_engine(e, self._engine_memo, self._leaf) for e in M])
+
+    def _leaf(self, x: sp.Basic):
+        """The stand-in of a symbol or a coefficient application, else None."""
+        if isinstance(x, AnalyticCoefficient):
+            w = self.stand_in(x)
             if w.name not in self.applications:
-                self.applications[w.name] = (type(c), self.engine(sp.Matrix([c.args[0]]))[0])
-            mapping[se.sympify(c)] = w
-        for s in M.free_symbols:
-            mapping[se.sympify(s)] = self.stand_in(s)
-        return se.Matrix(M.rows, M.cols, [se.sympify(e).xreplace(mapping) for e in M])
+                self.applications[w.name] = (type(x), to_engine(x.args[0], self._engine_memo,
+                                                                 self._leaf))
+            return w
+        if isinstance(x, sp.Symbol):
+            return self.stand_in(x)
+        if x.args and not _translatable(x):
+            return self._whole(x)
+        return None
+
+    def _whole(self, x: sp.Basic):
+        """A node the memoised translation does not handle, by SymEngine's own (its
+        symbols and coefficients replaced by their stand-ins afterwards)."""
+        mapping = {se.sympify(s): self._leaf(s)
+                   for s in distinct_nodes([x])
+                   if isinstance(s, (sp.Symbol, AnalyticCoefficient))}
+        return se.sympify(x).xreplace(mapping)
 
     def derivative_of(self, name: str):
         """The stand-in of c′(s) for the stand-in ``name`` of c(s)."""
@@ -79,10 +97,9 @@ class _Translation:
         self.applications.setdefault(w.name, (derivative(cls), argument))
         return w
 
-    @staticmethod
-    def sympy(M) -> sp.Matrix:
+    def sympy(self, M) -> sp.Matrix:
         """A SymEngine matrix back in SymPy (each stand-in becomes what it stands for)."""
-        return sp.Matrix(M.rows, M.cols, [sp.sympify(e) for e in M])
+        return sp.Matrix(M.rows, M.cols, [to_sympy(e, self._sympy_memo) for e in M])
 
     def jacobian(self, F, z: Sequence):
         """dF/dz of a SymEngine column F with respect to SymEngine symbols z."""
