@@ -38,7 +38,7 @@ def compile_units(units: list[str], args: list[str], folder: str) -> list[str]:
     cffi's build uses (distutils' compiler for this Python, customised as ``build_ext``
     does); the object files, in the order of ``units``."""
     import setuptools  # noqa: F401  (first: its distutils, as cffi does)
-    from concurrent.futures import ThreadPoolExecutor
+    from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
     from distutils.ccompiler import new_compiler
     from distutils.sysconfig import customize_compiler
 
@@ -57,7 +57,14 @@ def compile_units(units: list[str], args: list[str], folder: str) -> list[str]:
     largest_first = sorted(units, key=os.path.getsize, reverse=True)
     jobs = [(path, compiler()) for path in largest_first]
     with ThreadPoolExecutor(max_workers=max(1, cores or 1)) as pool:
-        built = dict(zip(largest_first, pool.map(one, jobs)))
+        futures = {pool.submit(one, job): job[0] for job in jobs}
+        done, _ = wait(futures, return_when=FIRST_EXCEPTION)
+        failed = [f for f in done if f.exception() is not None]
+        if failed:      # the first error ends the build: the units not started never start
+            for future in futures:
+                future.cancel()
+            raise failed[0].exception()
+        built = {futures[f]: f.result() for f in futures}
     return [built[path] for path in units]
 
 

@@ -52,8 +52,9 @@ def compile_extension(cdef: str, units: Sequence[tuple[str, str]], module: str,
         print(output, file=sys.stderr, end="" if output.endswith("\n") else "\n")
     result = workdir / "built.txt"
     if returncode != 0 or not result.is_file():
-        raise BuildError(f"the C compiler failed on {module}.c (exit status {returncode})\n"
-                         f"--- compiler output ---\n{output.strip()}")
+        sources = ", ".join(f"{module}_{name}.c" for name, _ in units)
+        raise BuildError(f"the C compile of {module} ({sources}) failed (exit status "
+                         f"{returncode})\n--- compiler output ---\n{output.strip()}")
     return Path(result.read_text())
 
 

@@ -114,6 +114,9 @@ def _render_kernel(kernel: Kernel, dm: DerivedModel) -> dict:
     names[dm.step] = "h"
     printer = ArrayPrinter(names)
     local: dict[sp.Symbol, str] = {}     # the temporaries' symbols and C names
+    # cse skips the symbols of the expressions it is given, not those of the others (a
+    # parameter t0 used by a definition only would be taken for the temporary t0)
+    inputs = (*kernel.z, *dm.parameters, dm.step)
 
     def statement(target: str, expr: sp.Expr, temporary: bool) -> Statement:
         uses = tuple(sorted(local[s] for s in expr.free_symbols if s in local))
@@ -123,8 +126,8 @@ def _render_kernel(kernel: Kernel, dm: DerivedModel) -> dict:
     # Definitions first, one CSE per dependency level, so that every temporary is
     # computed after the definitions it uses.
     for k, group in enumerate(_levels(kernel.definitions)):
-        shared, reduced = sp.cse([e for _, e in group], symbols=sp.numbered_symbols(f"u{k}_"),
-                                 order="none")
+        shared, reduced = sp.cse([e for _, e in group], order="none",
+                                 symbols=sp.numbered_symbols(f"u{k}_", exclude=inputs))
         for t, e in shared:
             temporaries.append(statement(str(t), e, True))
             local[t] = str(t)
@@ -132,7 +135,8 @@ def _render_kernel(kernel: Kernel, dm: DerivedModel) -> dict:
             temporaries.append(statement(names[sym], e, True))
             local[sym] = names[sym]
     flat = [e for _, M in kernel.outputs for e in M]
-    shared, reduced = sp.cse(flat, symbols=sp.numbered_symbols("t"), order="none")
+    shared, reduced = sp.cse(flat, symbols=sp.numbered_symbols("t", exclude=inputs),
+                             order="none")
     for t, e in shared:
         temporaries.append(statement(str(t), e, True))
         local[t] = str(t)

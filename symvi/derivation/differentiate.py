@@ -29,7 +29,7 @@ import symengine as se
 import sympy as sp
 
 from ..groupoids.analytic import AnalyticCoefficient, derivative
-from .translate import distinct_nodes, to_engine, to_sympy, translatable as _translatable
+from .translate import distinct_nodes, to_engine, to_sympy
 
 #: What SymEngine raises for an expression it cannot translate or differentiate.
 _UNTRANSLATABLE = (RuntimeError, TypeError, NotImplementedError)
@@ -66,20 +66,20 @@ class _Translation:
 
     def engine(self, M: sp.Matrix):
         """M as a SymEngine matrix in stand-ins."""
-        return se.Matrix(M.rows, M.cols, [to_engine(e, self._engine_memo, self._leaf) for e in M])
+        return se.Matrix(M.rows, M.cols, [self._to_engine(e) for e in M])
+
+    def _to_engine(self, e: sp.Basic):
+        return to_engine(e, self._engine_memo, self._leaf, self._whole)
 
     def _leaf(self, x: sp.Basic):
         """The stand-in of a symbol or a coefficient application, else None."""
         if isinstance(x, AnalyticCoefficient):
             w = self.stand_in(x)
             if w.name not in self.applications:
-                self.applications[w.name] = (type(x), to_engine(x.args[0], self._engine_memo,
-                                                                 self._leaf))
+                self.applications[w.name] = (type(x), self._to_engine(x.args[0]))
             return w
         if isinstance(x, sp.Symbol):
             return self.stand_in(x)
-        if x.args and not _translatable(x):
-            return self._whole(x)
         return None
 
     def _whole(self, x: sp.Basic):

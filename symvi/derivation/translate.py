@@ -36,33 +36,37 @@ def distinct_nodes(exprs: Iterable[sp.Basic]) -> set[sp.Basic]:
 
 
 def _post_order(root, memo: dict, leaf: Callable, build: Callable) -> None:
-    """memo[x] = the translation of every node x under ``root``, children first."""
-    stack = [root]
+    """memo[x] = the translation of every node x under ``root``: ``leaf(x)`` if that is
+    not None (asked once per node), else ``build(x, translated arguments)``."""
+    stack = [(root, False)]
     while stack:
-        x = stack[-1]
+        x, expanded = stack.pop()
         if x in memo:
-            stack.pop()
+            continue
+        if expanded:
+            memo[x] = build(x, [memo[a] for a in x.args])
             continue
         done = leaf(x)
-        if done is None and x.args:
-            pending = [a for a in x.args if a not in memo]
-            if pending:
-                stack.extend(pending)
-                continue
-            done = build(x, [memo[a] for a in x.args])
-        stack.pop()
-        memo[x] = done
+        if done is not None:
+            memo[x] = done
+            continue
+        stack.append((x, True))
+        stack.extend((a, False) for a in x.args if a not in memo)
 
 
-def to_engine(expr: sp.Basic, memo: dict, leaf: Callable[[sp.Basic], object | None]):
-    """``expr`` in SymEngine. ``leaf(x)`` is the translation of a node to be taken whole
-    (a stand-in; a node that is not :func:`translatable`), else None; atoms go through
-    ``symengine.sympify``."""
-    def atom(x):
+def to_engine(expr: sp.Basic, memo: dict, leaf: Callable[[sp.Basic], object | None],
+              whole: Callable[[sp.Basic], object] = se.sympify):
+    """``expr`` in SymEngine. ``leaf(x)`` is the translation of a node to be taken as it
+    is (a stand-in), else None; a node this module does not build (not
+    :func:`translatable`) is translated by ``whole`` (SymEngine's own translation), atoms
+    by ``symengine.sympify``."""
+    def taken(x):
         done = leaf(x)
+        if done is None and x.args and not translatable(x):
+            return whole(x)
         return se.sympify(x) if done is None and not x.args else done
 
-    _post_order(expr, memo, atom, _engine_node)
+    _post_order(expr, memo, taken, _engine_node)
     return memo[expr]
 
 
@@ -89,10 +93,10 @@ def _engine_node(x: sp.Basic, args: list):
 
 def to_sympy(expr, memo: dict) -> sp.Expr:
     """A SymEngine expression in SymPy (a stand-in becomes what it stands for)."""
-    def atom(x):
+    def taken(x):
         return sp.sympify(x) if not x.args else None
 
-    _post_order(expr, memo, atom, _sympy_node)
+    _post_order(expr, memo, taken, _sympy_node)
     return memo[expr]
 
 
