@@ -46,3 +46,28 @@ def test_the_memory_check_counts_what_is_stored(compiled, monkeypatch):
         mod.integrate([[1.0], [1.01]], n_steps, 0.01)
     alone = mod.integrate([[1.0], [1.01]], n_steps, 0.01, quantities=False)
     assert alone.success and alone.x.shape == (n_steps + 1, 1)
+
+
+def test_batches_of_paths_alone(compiled, monkeypatch):
+    """``integrate_many(..., quantities=False)``: the batch's paths, the same as with
+    their quantities and as the single calls', by the C batch loop and one by one."""
+    import importlib
+    mod = compiled("double_pendulum")
+    rng = np.random.default_rng(3)
+    starts = State(x=rng.uniform(-1, 1, (5, 2)), v=rng.uniform(-1, 1, (5, 2)))
+    full = mod.integrate_many(starts, 400, 0.005, workers=2)
+    alone = mod.integrate_many(starts, 400, 0.005, workers=2, quantities=False)
+    batch_loop = importlib.import_module(f"{mod.__name__}._runtime.batch_loop")
+    monkeypatch.setattr(batch_loop, "MAX_PATH_BYTES", 1)      # one trajectory at a time
+    one_by_one = mod.integrate_many(starts, 400, 0.005, workers=2, quantities=False,
+                                    keep_every=7)
+    assert full.success and alone.success and one_by_one.success
+    for field in ("x", "f", "t", "newton_iterations"):
+        np.testing.assert_array_equal(getattr(alone, field), getattr(full, field))
+    np.testing.assert_array_equal(one_by_one.x, full.x[:, ::7])
+    for batch in (alone, one_by_one):
+        assert batch.momenta is None and batch.energy is None and batch.noether is None
+    single = mod.integrate(State(x=starts.x[3], v=starts.v[3]), 400, 0.005, quantities=False)
+    np.testing.assert_array_equal(alone[3].x, single.x)
+    with pytest.raises(TypeError, match="quantities must be True or False"):
+        mod.integrate_many(starts, 10, 0.005, quantities=1)

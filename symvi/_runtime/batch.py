@@ -33,7 +33,7 @@ TASKS_PER_WORKER = 8
 def integrate_many(model, initial, n_steps: int, h, params: Mapping | None = None, *,
                    workers: int | None = None, keep_every: int = 1, final_only: bool = False,
                    maxiter: int = 50, xtol: float = 1e-12, ftol: float = 0.0,
-                   progress: bool | None = None) -> BatchResult:
+                   progress: bool | None = None, quantities: bool = True) -> BatchResult:
     """Integrate a batch of trajectories of ``n_steps`` steps each, in parallel threads.
 
     Parameters
@@ -53,6 +53,8 @@ def integrate_many(model, initial, n_steps: int, h, params: Mapping | None = Non
     maxiter, xtol, ftol : Newton's options of every step (see :func:`.stepping.integrate`).
     progress : a progress bar of finished trajectories on stderr (``tqdm``): True, False,
         or None for one when tqdm is installed and stderr is a terminal.
+    quantities : compute each trajectory's momenta, energies and conserved quantities
+        (default); False gives the paths alone (those fields None), less work and memory.
 
     Returns a :class:`BatchResult`: every array of :class:`StepResult` with a leading
     batch axis, each trajectory's status and message (``statuses``, ``messages``), and
@@ -68,10 +70,12 @@ def integrate_many(model, initial, n_steps: int, h, params: Mapping | None = Non
                               "workers", 1)
     maxiter = arguments.iterations(maxiter)
     xtol, ftol = arguments.tolerance(xtol, "xtol"), arguments.tolerance(ftol, "ftol")
-    _check_memory(model, B, n_steps, keep)
+    if not isinstance(quantities, bool):
+        raise TypeError(f"quantities must be True or False, got {quantities!r}")
+    _check_memory(model, B, n_steps, keep, quantities)
     run = _Run(model, item, B, isinstance(initial, State), steps, overrides, n_steps, keep,
-               (maxiter, xtol, ftol))
-    long = bytes_per_node(model) * (n_steps + 1) > batch_loop.MAX_PATH_BYTES
+               (maxiter, xtol, ftol), quantities)
+    long = bytes_per_node(model, quantities) * (n_steps + 1) > batch_loop.MAX_PATH_BYTES
     with Progress(B, "trajectories", progress) as bar:
         # long runs one by one through the chunked single loop: bounded memory
         return (run.one_by_one if long else run.in_slices)(workers, bar)
@@ -81,10 +85,10 @@ class _Run:
     """A checked batch: its members' data and the two ways of running it."""
 
     def __init__(self, model, item, B: int, from_state: bool, steps: np.ndarray, overrides,
-                 n_steps: int, keep: int, newton: tuple):
+                 n_steps: int, keep: int, newton: tuple, quantities: bool):
         self.model, self.item, self.B, self.from_state = model, item, B, from_state
         self.steps, self.overrides, self.n_steps, self.keep = steps, overrides, n_steps, keep
-        self.newton = newton
+        self.newton, self.quantities = newton, quantities
         self.stop = threading.Event()
 
     def one_by_one(self, workers: int, bar: Progress) -> BatchResult:
@@ -98,14 +102,16 @@ class _Run:
                 with NamedErrors(b, self.stop):
                     results[b] = stepping.run_steps(
                         self.model, self.item(b), self.n_steps, self.steps[b],
-                        self.overrides(b), *self.newton, self.keep, False, self.stop)
+                        self.overrides(b), *self.newton, self.keep, False, self.stop,
+                        self.quantities)
                 bar.update()
         run_threads(work, self.B, workers, self.stop)
         return BatchResult.stacked(results)
 
     def in_slices(self, workers: int, bar: Progress) -> BatchResult:
         """Slices of trajectories by one C call each, stored into one stacked result."""
-        stacked = batch_loop.Stacked(self.model, self.B, self.n_steps, self.keep)
+        stacked = batch_loop.Stacked(self.model, self.B, self.n_steps, self.keep,
+                                     self.quantities)
         per_slice = max(1, batch_loop.SLICE_STEPS // self.n_steps)
 
         def work(indices: np.ndarray) -> None:
@@ -257,11 +263,11 @@ def usable_cores() -> int:
         return os.cpu_count() or 1
 
 
-def _check_memory(model, B: int, n_steps: int, keep: int) -> None:
-    """Refuse a batch whose paths would not fit, before running it: each path is held
-    twice (its own result, then the stacked arrays)."""
+def _check_memory(model, B: int, n_steps: int, keep: int, quantities: bool) -> None:
+    """Refuse a batch whose paths (with their ``quantities`` or without) would not fit,
+    before running it: each path is held twice (its own result, then the stacked arrays)."""
     nodes = n_steps // keep + 2
-    require(2.0 * B * nodes * bytes_per_node(model),
+    require(2.0 * B * nodes * bytes_per_node(model, quantities),
             f"a batch of {B:,} paths of {nodes:,} stored nodes",
             "store every k-th node (keep_every=k) or only the final one (final_only=True)")
 

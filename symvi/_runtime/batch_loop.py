@@ -25,9 +25,9 @@ SLICE_STEPS = 2**16
 class Stacked:
     """The batch's stacked arrays, filled slice by slice, padded past failures."""
 
-    def __init__(self, model, B: int, n_steps: int, keep: int):
-        self.model, self.keep = model, keep
-        self.fields = layout(model)[1]
+    def __init__(self, model, B: int, n_steps: int, keep: int, quantities: bool = True):
+        self.model, self.keep, self.quantities = model, keep, quantities
+        self.fields = layout(model, quantities)[1]
         self.arrays, self.lengths = {}, {}
         for name, (lag, offset, shape) in self.fields.items():
             kept = kept_count(n_steps + lag, offset, keep)
@@ -51,7 +51,8 @@ class Stacked:
         status, message = BatchResult.summary(self.statuses, self.messages)
         return BatchResult(t=self.t, statuses=self.statuses, messages=tuple(self.messages),
                            lengths=lengths, status=status, message=message,
-                           **{"g": None, "energy": None, "noether": None} | arrays)
+                           **{"g": None, "momenta": None, "energy": None, "noether": None}
+                           | arrays)
 
 
 def run_slice(model, stacked: Stacked, buffers: "Scratch", indices, starts, n_steps: int,
@@ -72,7 +73,7 @@ def run_slice(model, stacked: Stacked, buffers: "Scratch", indices, starts, n_st
         c, model.ptr(z0), model.ptr(g0), new, model.ptr(P), P.shape[1], model.ptr(H),
         maxiter, xtol, ftol, *[model.ptr(scratch[k]) for k in ("x", "f", "g")],
         ffi.from_buffer("int[]", scratch["newton_iterations"]), ffi.from_buffer("long[]", done),
-        model.ptr(rnorm), ffi.from_buffer("int[]", status),
+        model.ptr(rnorm), ffi.from_buffer("int[]", status), int(stacked.quantities),
         *[model.ptr(scratch[k]) for k in ("momenta", "energy", "noether")])
     completed = _store_completed(model, stacked, np.asarray(indices), scratch, status == 0,
                                  E, H, outcome(Status.SUCCESS, n_steps, K, from_state, 0, 0.0,
@@ -120,8 +121,8 @@ class Scratch:
             integer = name == "newton_iterations"
             self.buffers[name] = np.empty((rows, max(E + lag, 1), *shape),
                                           dtype=np.intc if integer else float)
-        for name in ("g", "energy", "noether"):
-            self.buffers.setdefault(name, np.empty((rows, 1)))
+        for name in ("g", "momenta", "energy", "noether"):   # what the C call is not
+            self.buffers.setdefault(name, np.empty((rows, 1)))  # asked to write
 
     def take(self, c: int) -> dict:
         """The first c rows, zeroed (contiguous: a leading slice)."""
