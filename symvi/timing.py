@@ -34,6 +34,19 @@ def interruptible() -> bool:
             and signal.getitimer(signal.ITIMER_REAL)[0] == 0.0)
 
 
+#: Code run while a ``with`` block is left: an alarm there is put off to the next repeat.
+_EXITS = frozenset({contextlib._GeneratorContextManager.__exit__.__code__})
+
+
+def _leaving_context(frame) -> bool:
+    """Whether ``frame`` or a caller of it is a generator context manager's ``__exit__``."""
+    while frame is not None:
+        if frame.f_code in _EXITS:
+            return True
+        frame = frame.f_back
+    return False
+
+
 @contextlib.contextmanager
 def interrupted_after(seconds: float | None) -> Iterator[None]:
     """Raise :class:`Expired` in the body once ``seconds`` have passed (None: never), where
@@ -44,7 +57,11 @@ def interrupted_after(seconds: float | None) -> Iterator[None]:
     armed = [True]
 
     def on_alarm(signum, frame) -> None:
-        if armed[0]:        # not once the body has ended and the timer is being disarmed
+        # not once the body has ended and the timer is being disarmed, nor while a
+        # context manager is being left (an alarm repeated during the unwinding of the
+        # first Expired would stop contextlib before it closes this generator, leaving
+        # the timer running; the next repeat raises once the exits are done)
+        if armed[0] and not _leaving_context(frame):
             raise Expired()
 
     saved_handler = signal.signal(signal.SIGALRM, on_alarm)
