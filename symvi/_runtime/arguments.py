@@ -22,6 +22,13 @@ def _is_real(value) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
+def flag(value, what: str) -> bool:
+    """``value``, which must be True or False (a TypeError naming ``what`` otherwise)."""
+    if not isinstance(value, bool):
+        raise TypeError(f"{what} must be True or False, got {value!r}")
+    return value
+
+
 def real_array(value, what: str) -> np.ndarray:
     """``value`` as a float64 array, refusing strings, booleans, complex and other
     non-numbers (NumPy would convert ``'2.0'`` and ``True`` without a word)."""

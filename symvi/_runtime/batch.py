@@ -70,8 +70,7 @@ def integrate_many(model, initial, n_steps: int, h, params: Mapping | None = Non
                               "workers", 1)
     maxiter = arguments.iterations(maxiter)
     xtol, ftol = arguments.tolerance(xtol, "xtol"), arguments.tolerance(ftol, "ftol")
-    if not isinstance(quantities, bool):
-        raise TypeError(f"quantities must be True or False, got {quantities!r}")
+    quantities = arguments.flag(quantities, "quantities")
     _check_memory(model, B, n_steps, keep, quantities)
     run = _Run(model, item, B, isinstance(initial, State), steps, overrides, n_steps, keep,
                (maxiter, xtol, ftol), quantities)

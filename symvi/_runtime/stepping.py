@@ -100,8 +100,7 @@ def run_steps(model, initial, n_steps: int, h: float, params, maxiter: int, xtol
     p = model.params(params)
     z0, g0 = model.initial_state(initial, h, p)
     new = n_steps - (K - 1)         # the initial elements are the first steps
-    if not isinstance(quantities, bool):
-        raise TypeError(f"quantities must be True or False, got {quantities!r}")
+    quantities = arguments.flag(quantities, "quantities")
     check_memory(model, n_steps, keep, BUFFER_STEPS if keep > 1 else 0, quantities)
     run = _Run(model, new, keep, p, h, stop, quantities)
     code, steps, rnorm, iterations = run.loop(z0, g0, maxiter, xtol, ftol)

@@ -8,8 +8,8 @@ neither can disturb the caller's threads. Usage::
 
 SPEC names the module, the file holding the cdef, the translation units (C files,
 compiled in parallel), the compile arguments and libraries, the build folder and the file
-to write the built extension's path into. Imports only the standard library and cffi (the script is run by path, not
-as part of the symvi package, so that SymPy is never imported).
+to write the built extension's path into. Imports only the standard library and cffi (the
+script is run by path, not as part of the symvi package, so that SymPy is never imported).
 """
 import json
 import os

@@ -123,23 +123,25 @@ def _render_kernel(kernel: Kernel, dm: DerivedModel) -> dict:
         return Statement(target, printer.doprint(expr), temporary, uses)
 
     temporaries = []
+
+    def define(symbol: sp.Symbol, name: str, expr: sp.Expr) -> None:
+        temporaries.append(statement(name, expr, True))
+        local[symbol] = name
+
     # Definitions first, one CSE per dependency level, so that every temporary is
     # computed after the definitions it uses.
     for k, group in enumerate(_levels(kernel.definitions)):
         shared, reduced = sp.cse([e for _, e in group], order="none",
                                  symbols=sp.numbered_symbols(f"u{k}_", exclude=inputs))
         for t, e in shared:
-            temporaries.append(statement(str(t), e, True))
-            local[t] = str(t)
+            define(t, str(t), e)
         for (sym, _), e in zip(group, reduced):
-            temporaries.append(statement(names[sym], e, True))
-            local[sym] = names[sym]
+            define(sym, names[sym], e)
     flat = [e for _, M in kernel.outputs for e in M]
     shared, reduced = sp.cse(flat, symbols=sp.numbered_symbols("t", exclude=inputs),
                              order="none")
     for t, e in shared:
-        temporaries.append(statement(str(t), e, True))
-        local[t] = str(t)
+        define(t, str(t), e)
     targets = [f"{name}[{i}]" for name, M in kernel.outputs for i in range(len(M))]
     code = on_demand(temporaries, [statement(t, e, False) for t, e in zip(targets, reduced)])
     parts, work = split(code) if len(code) > SPLIT_ABOVE else ([], 0)
