@@ -24,10 +24,13 @@ from symvi.models import BOUNDED, BUNDLED, CONTROL, get  # noqa: E402
 
 FIRST_ORDER = ("harmonic_oscillator", "pendulum", "double_pendulum", "robot_arm")
 SECOND_ORDER = ("cubic_spline", "spline_potential")
+#: Bundled Lagrangians of order k > 2 on the pair groupoid (issue 25).
+HIGHER_ORDER = ("minimum_jerk", "minimum_snap")
 #: Bundled models on the pair groupoid (node-based oracle, Taylor consistency).
-PAIR = FIRST_ORDER + SECOND_ORDER
+PAIR = FIRST_ORDER + SECOND_ORDER + HIGHER_ORDER
 #: Bundled models on matrix Lie groups (over a point).
-LIE = ("rigid_body", "rigid_body_exp", "planar_body", "planar_body_exp", "so3_cubic")
+LIE = ("rigid_body", "rigid_body_exp", "planar_body", "planar_body_exp", "so3_cubic",
+       "so3_jerk", "se3_snap")
 #: Bundled models on action groupoids Q×H.
 ACTION = ("heavy_top", "heavy_top_exp", "spherical_pendulum", "spherical_pendulum_exp",
           "se3_body", "se3_body_exp")
@@ -161,7 +164,7 @@ def derived(prebuilt):
     return get_derived
 
 
-__all__ = ["BOUNDED", "BUNDLED", "FIRST_ORDER", "SECOND_ORDER", "PAIR", "LIE", "ACTION", "CONTROL"]
+__all__ = ["BOUNDED", "BUNDLED", "FIRST_ORDER", "SECOND_ORDER", "HIGHER_ORDER", "PAIR", "LIE", "ACTION", "CONTROL"]
 
 
 @pytest.fixture

@@ -24,14 +24,18 @@ def test_every_check_passes_or_does_not_apply_on_bundled_models(name, capsys):
     assert [r["name"] for r in report["results"]] == list(CHECKS)
     results = {r["name"]: r for r in report["results"]}
     statuses = {c: r["status"] for c, r in results.items()}
-    assert all(statuses[c] == "pass" for c in ("algebroid", "routes", "consistency",
-                                               "regularity")), statuses
+    assert all(statuses[c] == "pass" for c in ("algebroid", "consistency", "regularity")), \
+        statuses
     model = get(name)
     order = model.order
-    routes = results["routes"]["data"]
-    # the Σ_{L_d} route of paper §4.2 agrees with the engine's residual to 50 digits
-    assert routes["order"] == order and routes["max_relative_difference"] < 1e-28
-    assert ("+R" if order == 1 else "−R") in routes["convention"]
+    if order <= 2:
+        # the Σ_{L_d} route of paper §4.2 agrees with the engine's residual to 50 digits
+        routes = results["routes"]["data"]
+        assert statuses["routes"] == "pass"
+        assert routes["order"] == order and routes["max_relative_difference"] < 1e-28
+        assert ("+R" if order == 1 else "−R") in routes["convention"]
+    else:   # the paper builds Σ_{L_d} for orders 1 and 2 only
+        assert statuses["routes"] == "skip" and "order" in results["routes"]["summary"]
     consistency = results["consistency"]
     data = consistency["data"]
     assert (data["power"], data["sign"], data["order"], data["next_power"]) == (1, 1, 2, 3)

@@ -48,6 +48,9 @@ def _hand_written(name):
                   - m2 * l1 * l2 * _d(a)**2 * sp.sin(a - b) + m2 * g * l2 * sp.sin(b))]
     if name == "robot_arm":
         return _kane(model)
+    if name in ("minimum_jerk", "minimum_snap"):     # L = ½|q⁽ᵏ⁾|²: (−1)ᵏ q⁽²ᵏ⁾
+        k = model.order
+        return [(-1)**k * _d(_q(c), 2 * k) for c in "xyz"]
     x, y = _q("x"), _q("y")
     if name == "cubic_spline":
         return [_d(x, 4), _d(y, 4)]

@@ -7,16 +7,19 @@ middle of their element, action base points from β, multipliers at their window
 node). It passes when its leading term is ±h^p·E with E the variational derivative of the
 action —
 
-* pair groupoid: E(L) = ∂L/∂q − d/dt ∂L/∂q̇ + d²/dt² ∂L/∂q̈;
+* pair groupoid: E(L) = ∂L/∂q − d/dt ∂L/∂q̇ + d²/dt² ∂L/∂q̈ (of order r:
+  Σ_{j=0}^{r} (−d/dt)^j ∂L/∂q⁽ʲ⁾);
 * Lie groups, action groupoids, products: E = −EL_r(L) on the Lie algebroid (Appendix C.2
-  for r = 1; the second-order operator EL₂ with P = ∂L̃/∂y − d/dt ∂L̃/∂ẏ for r = 2);
+  for r = 1; the second-order operator EL₂ with P = ∂L̃/∂y − d/dt ∂L̃/∂ẏ for r = 2; of
+  order r, P = Σ_{j<r} (−d/dt)^j ∂L/∂y⁽ʲ⁾);
 * constrained (optimal-control) models: the residual of the augmented action with smooth
   multipliers λ_A(t) against E(L̃ + λ_A Φ^A) (d/dt acting on λ, ERRATA item 8), *and* the
   discrete constraints of one window against h·Φ —
 
 and reports p, the sign and the order (next power − leading power: the relative error of
 the residual as an approximation of h^p·E). A correct symmetric rule gives +h·E + O(h³),
-order 2. It fails when the leading term is not ±h^p·E — naming, per component, the
+order 2 (measured also for the order-k rules ``central3`` … ``central6`` and
+``lie_central3`` … ``lie_central6``: the h² term vanishes, the h³ one does not). It fails when the leading term is not ±h^p·E — naming, per component, the
 leading coefficient, the expected one and their difference — or when the order falls
 short of the rule's declared ``consistency_order`` (:mod:`symvi.discretisation.rules`).
 
@@ -42,9 +45,12 @@ def _equation(model) -> str:
     """What E is, in words."""
     r, groupoid = model.order, model.groupoid
     if groupoid.elements_are_node_pairs and not model.constraints:
+        if r > 2:
+            return f"E(L) = Σ_{{j=0}}^{{{r}}} (−d/dt)^j ∂L/∂q⁽ʲ⁾"
         return ("E(L) = ∂L/∂q − d/dt ∂L/∂q̇" if r == 1
                 else "E(L) = ∂L/∂q − d/dt ∂L/∂q̇ + d²/dt² ∂L/∂q̈")
-    operator = "EL(L)" if r == 1 else "EL₂(L̃)"
+    operator = "EL(L)" if r == 1 else "EL₂(L̃)" if r == 2 else \
+        f"EL_{r}(L) with P = Σ_{{j<{r}}} (−d/dt)^j ∂L/∂y⁽ʲ⁾"
     if model.constraints:
         operator = "EL₂(L̃ + λ_A Φ^A)"
     return f"E = −{operator} ({groupoid.equation_setting(r)})"

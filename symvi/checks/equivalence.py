@@ -20,7 +20,7 @@ from sympy.core.function import AppliedUndef
 
 from ..discretisation.discretise import h as STEP
 from ..declaration.rank import generic_rank
-from .jets import derivative_name
+from ..groupoids.base import derivative_name
 from .series import vanishes_at
 from .spaces import Space
 
@@ -42,7 +42,7 @@ def functions_of_time(expr: sp.Expr, names) -> tuple[sp.Expr, dict[str, str]]:
 
     A display may write the model's quantities as functions of time: Ω₁(t) is the model
     symbol Omega1 and its k-th derivative the jet symbol of that name
-    (:func:`~symvi.checks.jets.derivative_name`: ``Omega1_dot``, …, ``Omega1_d4``) where
+    (:func:`~symvi.groupoids.base.derivative_name`: ``Omega1_dot``, …, ``Omega1_d4``) where
     the model declares it. Anything else — λ(t) where the multipliers are lambda1,
     lambda2, lambda3 — becomes a placeholder symbol printed as the term itself, so that
     the comparison goes on with it undefined (and shows "lambda(t) where lambda1 is

@@ -10,7 +10,8 @@ E = δS/δ(node), with one sign for every groupoid and order:
 
 * pair groupoid, :func:`euler_lagrange`: E(L) = ∂L/∂q − d/dt ∂L/∂q̇ + d²/dt² ∂L/∂q̈,
   which is minus the usual first-order expression d/dt ∂L/∂q̇ − ∂L/∂q and equal to the
-  usual second-order one;
+  usual second-order one; for a Lagrangian of order r, E(L) = Σ_{j=0}^{r} (−d/dt)^j
+  ∂L/∂q⁽ʲ⁾;
 * on a Lie algebroid (q, y; anchor ρ, structure functions C), E = −EL_r(L) with
   the operator of Appendix C.2 (:func:`symvi.declaration.control.euler_lagrange_operator`)
 
@@ -21,7 +22,9 @@ E = δS/δ(node), with one sign for every groupoid and order:
 
       EL₂(L̃)_α = d/dt P_α − ρ^i_α ∂L̃/∂q^i + C^γ_{αβ} y^β P_γ,
 
-  where d/dt F = ∂F/∂q^i ρ^i_β y^β + Σ_k ∂F/∂y^{(k)} y^{(k+1)}. It is the first-order
+  where d/dt F = ∂F/∂q^i ρ^i_β y^β + Σ_k ∂F/∂y^{(k)} y^{(k+1)}. Of order r (a Lagrangian
+  L(q, y, …, y⁽ʳ⁻¹⁾)), EL_r has the same form with P_γ = Σ_{j=0}^{r−1} (−d/dt)^j
+  ∂L/∂y⁽ʲ⁾_γ (r − 1 integrations by parts of δy⁽ʲ⁾ = (d/dt)^j (η̇ + [y, η])). It is the first-order
   operator with ∂L/∂y replaced by the second-order momentum P (δy = η̇ + [y, η] enters the
   action through P after one integration by parts). On TQ (ρ = I, C = 0) EL_r = −E(L) of
   the pair groupoid; on so(3) with L̃ = ½|Ω̇ − f(Ω)|² it is −(d/dt + Ω×)(u̇ + Df(Ω)ᵀu),
@@ -176,7 +179,8 @@ def _to_jets(expr: sp.Matrix, jets, t: sp.Symbol) -> sp.Matrix:
 def euler_lagrange(model: Model, t: sp.Symbol = TIME, *, multipliers: bool = True) -> sp.Matrix:
     """The variational derivative E of the action along functions of ``t`` (module doc).
 
-    Pair groupoid: E(L) = ∂L/∂q − d/dt ∂L/∂q̇ + d²/dt² ∂L/∂q̈ along q_c(t). Other groupoids:
+    Pair groupoid: E(L) = ∂L/∂q − d/dt ∂L/∂q̇ + d²/dt² ∂L/∂q̈ along q_c(t) (of order r,
+    Σ_{j≤r} (−d/dt)^j ∂L/∂q⁽ʲ⁾). Other groupoids:
     E = −EL_r(L) on the algebroid (:func:`euler_lagrange_algebroid`). For a constrained
     model with ``multipliers``, E(L̃ + λ_A(t) Φ^A), the multipliers being functions
     ``lambda0(t)``, … Needs a model declared with a continuous Lagrangian.

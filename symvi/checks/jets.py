@@ -4,13 +4,15 @@ Time derivatives are plain *jet* symbols until a result is reported, so the iden
 consistency expansions (:mod:`symvi.checks.expansions`) need are polynomial ones:
 
 * :class:`_Jets`: q^{(k)}(t) on the pair groupoid, with :func:`_variational_derivative`
-  E(L) = ∂L/∂q − d/dt ∂L/∂q̇ + d²/dt² ∂L/∂q̈;
+  E(L) = ∂L/∂q − d/dt ∂L/∂q̇ + d²/dt² ∂L/∂q̈, and for a Lagrangian of order r
+  E(L) = Σ_{j=0}^{r} (−d/dt)^j ∂L/∂q⁽ʲ⁾ (the symbols q⁽ʲ⁾ are ``groupoid.derivative(j)``);
 * :class:`_AlgebroidJets`: on a Lie algebroid, the base point q(t), the derivatives
   y^{(k)}(t) of the fibre curve and of the multipliers λ_A(t); derivatives of q follow
   from the anchor, q̇ = ρ(q) y;
 * :func:`euler_lagrange_algebroid`: the operator EL₁ of Appendix C.2 and its second-order
   version EL₂ (paper eq. ``ecuacionesvakonomoalgebroides2``, times −1), with signs and
-  conventions as stated in :mod:`symvi.checks.expansions`;
+  conventions as stated in :mod:`symvi.checks.expansions`; of order r, EL_r with the
+  momentum P_α = Σ_{j<r} (−d/dt)^j ∂L/∂y⁽ʲ⁾_α (y⁽ʲ⁾ the symbols of :func:`fibre_levels`);
 * :func:`continuous_equations`: those equations with the constraints Φ^A = 0, in named
   jet symbols (``Omega1_dddot``, ``lambda1_dot``), for comparison with hand-derived ones;
 * :func:`constraint_functions`, and how each groupoid's fibre is sampled along a curve
@@ -29,6 +31,7 @@ from sympy.core.function import AppliedUndef
 
 from ..errors import ModelError
 from ..declaration.model import Model
+from ..groupoids.base import derivative_name
 from .series import _Generators, _Poly, _generator, active_generators, generator_expr, in_scope
 
 #: Time variable of the continuous curve the nodes are sampled from.
@@ -100,8 +103,21 @@ def _replace_functions(expr, t: sp.Symbol, jet):
     return expr.xreplace(mapping)
 
 
+def derivative_levels(groupoid, order: int) -> list[tuple[sp.Symbol, ...]]:
+    """The symbols of q, q̇, …, q⁽ʳ⁾ (r = ``order``) of a pair groupoid's Lagrangians:
+    ``groupoid.derivative(j)`` where the groupoid has it (``q``, ``qdot``, ``qddot``, then
+    ``<name>_d<j>``), else its ``q``, ``qdot``, ``qddot``."""
+    if hasattr(groupoid, "derivative"):
+        return [tuple(groupoid.derivative(j)) for j in range(order + 1)]
+    if order > 2:
+        raise ModelError(f"{groupoid!r} has no symbols for derivatives of order {order}")
+    return [tuple(groupoid.q), tuple(groupoid.qdot), tuple(groupoid.qddot)][: order + 1]
+
+
 def _variational_derivative(groupoid, lagrangian: sp.Expr, order: int, jets: _Jets) -> sp.Matrix:
-    levels = [tuple(groupoid.q), tuple(groupoid.qdot), tuple(groupoid.qddot)][: order + 1]
+    """E(L) = Σ_{j=0}^{r} (−d/dt)^j ∂L/∂q⁽ʲ⁾ on jets (r = ``order``; the jets' depth must be
+    at least 2r)."""
+    levels = derivative_levels(groupoid, order)
     mapping = {s: jets.symbols[c][k] for k, level in enumerate(levels)
                for c, s in enumerate(level)}
     rows = []
@@ -138,6 +154,28 @@ def unsupported(groupoid) -> str | None:
     return None
 
 
+def fibre_levels(groupoid, algebroid=None) -> list[tuple[sp.Symbol, ...]]:
+    """The continuous symbols of y, ẏ, …, y⁽ᵏ⁻¹⁾ on the algebroid of ``groupoid``, for every
+    order k its Lagrangians may have (``groupoid.max_order``).
+
+    y and ẏ are the algebroid's ``y`` and ``ydot``; y⁽ʲ⁾ is the groupoid's leading symbol
+    of order j + 1 (``leading_symbols(j + 1)``: ξ⁽ʲ⁾ on a Lie group, q⁽ʲ⁺¹⁾ on a pair
+    groupoid, the factors' in a product), used only where its orders 1 and 2 are the
+    algebroid's y and ẏ."""
+    a = algebroid if algebroid is not None else groupoid.algebroid()
+    levels = [tuple(a.y), tuple(a.ydot)]
+    top = getattr(groupoid, "max_order", 2)
+    if top <= 2:
+        return levels
+    try:
+        leading = [tuple(groupoid.leading_symbols(j + 1)) for j in range(top)]
+    except (ModelError, NotImplementedError, KeyError, IndexError):
+        return levels
+    if leading[0] != levels[0] or leading[1] != levels[1]:
+        return levels
+    return leading
+
+
 def component_names(groupoid) -> tuple[str, ...]:
     """Names of the residual's components (:meth:`Groupoid.component_names`)."""
     return tuple(groupoid.component_names())
@@ -152,6 +190,8 @@ class _AlgebroidJets:
                  multiplier_names: Sequence[str] | None = None):
         algebroid = groupoid.algebroid()
         self.algebroid, self.depth = algebroid, depth
+        #: The continuous symbols of y, ẏ, …, y⁽ʲ⁾ (:func:`fibre_levels`).
+        self.levels = fibre_levels(groupoid, algebroid)
         self.layout = _layout(groupoid)
         if len(self.layout) != len(algebroid.y):
             raise ModelError("the algebroid's rank differs from the groupoid's fibre dimension")
@@ -178,10 +218,13 @@ class _AlgebroidJets:
         self.generators = active_generators() or _Generators()
 
     def symbol_map(self) -> dict:
-        """The groupoid's continuous symbols (q, y, ẏ of the algebroid) → jets."""
+        """The groupoid's continuous symbols (q, y, ẏ of the algebroid, and the higher
+        derivatives y⁽ʲ⁾ of Lagrangians of order > 2, j ≤ depth) → jets."""
         a = self.algebroid
-        return dict(zip(a.q, self.q)) | {y: c[0] for y, c in zip(a.y, self.y)} \
-            | {v: c[1] for v, c in zip(a.ydot, self.y)}
+        mapping = dict(zip(a.q, self.q))
+        for j, level in enumerate(self.levels[:self.depth + 1]):
+            mapping |= {s: c[j] for s, c in zip(level, self.y)}
+        return mapping
 
     def derivative(self, expr: sp.Expr) -> sp.Expr:
         """Total time derivative: ∂/∂q · ρ(q) y + Σ_k ∂/∂y^{(k)} · y^{(k+1)} (and λ)."""
@@ -269,13 +312,20 @@ class _AlgebroidJets:
 
 def _algebroid_operator(jets: _AlgebroidJets, lagrangian: sp.Expr, order: int) -> sp.Matrix:
     """EL_r(L) on jets (:mod:`symvi.checks.expansions`): d/dt P_α − ρ^i_α ∂L/∂q^i + C^γ_{αβ} y^β P_γ with
-    P = ∂L/∂y (r = 1) or ∂L/∂y − d/dt ∂L/∂ẏ (r = 2)."""
+    P_α = Σ_{j=0}^{r−1} (−d/dt)^j ∂L/∂y⁽ʲ⁾_α: ∂L/∂y (r = 1), ∂L/∂y − d/dt ∂L/∂ẏ (r = 2), …
+    (the jets' depth must be at least 2r − 1)."""
     y0 = [column[0] for column in jets.y]
     P = []
     for c, column in enumerate(jets.y):
         p = sp.diff(lagrangian, y0[c])
-        if order == 2:
-            p -= jets.derivative(sp.diff(lagrangian, column[1]))
+        for j in range(1, order):
+            term = sp.diff(lagrangian, column[j])
+            for _ in range(j):
+                term = jets.derivative(term)
+            if j % 2:
+                p -= term
+            else:
+                p += term
         P.append(sp.expand(p))
     dLdq = [sp.diff(lagrangian, s) for s in jets.q]
     rows = []
@@ -293,7 +343,8 @@ def euler_lagrange_algebroid(groupoid, lagrangian: sp.Expr, order: int,
     """The Euler–Lagrange operator EL_r(L) on the algebroid of ``groupoid`` along functions of
     ``t`` (:mod:`symvi.checks.expansions`): EL₁ of Appendix C.2 for ``order`` 1 (the same as
     :func:`symvi.declaration.control.euler_lagrange_operator`), the second-order operator EL₂ for
-    ``order`` 2. ``lagrangian`` (and ``constraints``) are written in the groupoid's
+    ``order`` 2, and for ``order`` r ≥ 3 the same with the momentum
+    P_α = Σ_{j<r} (−d/dt)^j ∂L/∂y⁽ʲ⁾_α. ``lagrangian`` (and ``constraints``) are written in the groupoid's
     continuous symbols; with constraints Φ^A the operator acts on L + λ_A(t) Φ^A, the
     multipliers being functions ``lambda0(t)``, ``lambda1(t)``, … of time.
 
@@ -301,8 +352,10 @@ def euler_lagrange_algebroid(groupoid, lagrangian: sp.Expr, order: int,
     coordinates y_α(t) with their derivatives (a pair factor's y^{(k)} is q^{(k+1)}).
     The variational derivative of the action is −EL_r (:func:`euler_lagrange`).
     """
-    if order not in (1, 2):
-        raise ModelError(f"order must be 1 or 2, got {order!r}")
+    top = max(2, getattr(groupoid, "max_order", 2))
+    if not isinstance(order, int) or isinstance(order, bool) or not 1 <= order <= top:
+        raise ModelError(f"order must be an integer from 1 to {top} on {groupoid!r}, "
+                         f"got {order!r}")
     jets = _AlgebroidJets(groupoid, 2 * order + 1, len(constraints))
     mapping = jets.symbol_map()
     L = sp.sympify(lagrangian).xreplace(mapping) \
@@ -320,12 +373,6 @@ def constraint_functions(model: Model, t: sp.Symbol = TIME) -> sp.Matrix:
     mapping = jets.symbol_map()
     return sp.Matrix([jets.to_functions(sp.expand(c.xreplace(mapping)), t)
                       for c in model.constraints])
-
-
-def derivative_name(name: str, k: int) -> str:
-    """Name of the k-th time derivative of the coordinate ``name``: ``Omega1``,
-    ``Omega1_dot``, ``Omega1_ddot``, ``Omega1_dddot``, then ``Omega1_d4``, …"""
-    return name + (("", "_dot", "_ddot", "_dddot")[k] if k < 4 else f"_d{k}")
 
 
 @dataclass(frozen=True, eq=False)

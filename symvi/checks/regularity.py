@@ -1,6 +1,8 @@
 """Check ``regularity``: the matrix defining the step map is generically non-singular
 (paper §4.3; D₁₂L_d for first-order and D₁₃L_d for second-order pair-groupoid Lagrangians,
-their group analogues, the bordered matrix of a constrained problem).
+D₁,ₖ₊₁L_d for order k (D₁₄L_d … D₁₇L_d for k = 3 … 6: ∂R/∂q_{2k} of the residual at the
+middle node, which only the last window's first slot sees), their group analogues, the
+bordered matrix of a constrained problem; named by the groupoid's ``step_matrix_name``).
 
 The generic rank is measured at random points (:func:`symvi.declaration.rank.generic_rank`: an analytic
 matrix has its generic rank at a random point with probability one). When the matrix is

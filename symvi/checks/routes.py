@@ -21,6 +21,9 @@ At the sample elements the check also compares the invariant fields from the str
 maps with the groupoid's ``right``/``left`` and tests the groupoid axioms and
 ``target`` = α∘i, so that a disagreement names the map at fault.
 
+Orders r ≥ 3 are skipped: route 2 would need Σ_{L_d} in the cotangent groupoid of a higher
+prolongation of G, which the paper does not construct.
+
 Constrained models (optimal control) use the augmented L_d + λ^w Φ_d on each window w,
 with the multipliers of the r + 1 windows taken from the stencil kernel's z.
 
@@ -101,7 +104,10 @@ def run(ctx) -> CheckResult:
     dm = ctx.discrete
     G, r = dm.groupoid, dm.order
     if r not in (1, 2):
-        return CheckResult.skipped(NAME, f"route 2 is written for orders 1 and 2, not {r}")
+        return CheckResult.skipped(
+            NAME, f"route 2 is written for orders 1 and 2, not {r}: Σ_L_d of an L_d of order "
+                  f"{r} lies in the cotangent groupoid of a higher prolongation of G, which "
+                  f"the paper (§4.2: T*G, T*(P^αG)) does not construct")
     try:
         with mpmath.workdps(DPS):
             G.inverse(G.identity((sp.S.Zero,) * G.source_dim)[0],

@@ -39,6 +39,17 @@ Coordinates and structures (sign convention: {q, p} = 1, Hamiltonian vector fiel
   and y = (q₀, p₀, q₁, p₁) with the canonical form of T*(Q×Q). The relative sign
   between the Lie–Poisson and the canonical block matters here; the one above is the
   reduction's, and the opposite sign fails on ``so3_cubic`` (tests).
+* **order r ≥ 3** — the same reduction of the unreduced flow on T*(H^r) (the canonical
+  form pulled back by F⁻L_d: Benito, de León & Martín de Diego), in the chart
+  (h₀, w₀, …, w_{r−2}) of the first r nodes: with P₀ … P_{r−1} = F⁻L_d(g₀ … g_{2r−2})
+  and R_j, L_j the fibre rows of right(g_j), left(g_j) (node i's variation moves
+  f_{i−1} by R_{i−1} and f_i by L_i),
+
+      P_{r−1} = R_{r−2}ᵀ p_{r−2},  P_i = R_{i−1}ᵀ p_{i−1} + L_iᵀ p_i,  ν = P₀ − L₀ᵀ p₀,
+
+  solved from the last node back; y = (x₀, ν, f₀, …, f_{r−2}, p₀, …, p_{r−2}) and Π =
+  (linear Poisson structure on (x₀, ν)) ⊕ (canonical on (f, p)). On the pair groupoid
+  p_j = P_{j+1}, ν = P₀: the canonical form of T*(Q^r) in (q₀, …, q_{r−1}, p₀, …, p_{r−1}).
 """
 from __future__ import annotations
 
@@ -207,34 +218,77 @@ class StepMap:
         return np.concatenate([x1, s[m + n:], f]), M
 
     # -- Hamiltonian coordinates --------------------------------------------------------
+    def _element_variations(self, element: np.ndarray, Dg: np.ndarray):
+        """Fibre rows of right(g), left(g) at ``element`` g = (x, f) and their derivatives
+        along the state ((n, n) and (n, n, d)); ``Dg`` is d(x, f)/d(state), (m + n) × d."""
+        m, n = self.m, self.n
+        Rv, DR = self._right(element)
+        Lv, DL = self._left(element)
+        R = Rv.reshape(m + n, n)[m:]
+        L = Lv.reshape(m + n, n)[m:]
+        dR = DR.reshape(m + n, n, m + n)[m:] @ Dg
+        dL = DL.reshape(m + n, n, m + n)[m:] @ Dg
+        return R, L, dR, dL
+
     def legendre(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """y = Λ(s) and DΛ(s) (module docstring: (x₀, μ₀) or (x₀, ν, f₀, p))."""
-        m, n, d = self.m, self.n, self.state_dim
+        """y = Λ(s) and DΛ(s) (module docstring: (x₀, μ₀), (x₀, ν, f₀, p) or, of order
+        r ≥ 3, (x₀, ν, f₀, …, f_{r−2}, p₀, …, p_{r−2}))."""
+        m, n, d, r = self.m, self.n, self.state_dim, self.r
         P, DP = self._momentum(s)
         x0 = s[:m]
         Dx = np.eye(d)[:m]
-        if self.r == 1:
+        if r == 1:
             return np.concatenate([x0, P]), np.vstack([Dx, DP])
-        P0, P1, DP0, DP1 = P[:n], P[n:2 * n], DP[:n], DP[n:2 * n]
-        element = s[:m + n]
-        Rv, DR = self._right(element)
-        Lv, DL = self._left(element)
-        # Fibre rows of right(g₀), left(g₀) and their derivatives (…, index of (x₀, f₀)).
-        R = Rv.reshape(m + n, n)[m:]
-        L = Lv.reshape(m + n, n)[m:]
-        dR = DR.reshape(m + n, n, m + n)[m:]
-        dL = DL.reshape(m + n, n, m + n)[m:]
-        p = np.linalg.solve(R.T, P1)
-        # Rᵀp = P₁  ⇒  Rᵀ dp = dP₁ − (dR)ᵀ p.
-        dRtp = np.zeros((n, d))
-        dRtp[:, :m + n] = np.einsum("iak,i->ak", dR, p)
-        Dp = np.linalg.solve(R.T, DP1 - dRtp)
-        nu = P0 - L.T @ p
-        dLtp = np.zeros((n, d))
-        dLtp[:, :m + n] = np.einsum("iak,i->ak", dL, p)
-        Dnu = DP0 - dLtp - L.T @ Dp
-        Df = np.eye(d)[m:m + n]
-        return (np.concatenate([x0, nu, s[m:m + n], p]), np.vstack([Dx, Dnu, Df, Dp]))
+        if r == 2:
+            P0, P1, DP0, DP1 = P[:n], P[n:2 * n], DP[:n], DP[n:2 * n]
+            element = s[:m + n]
+            Rv, DR = self._right(element)
+            Lv, DL = self._left(element)
+            # Fibre rows of right(g₀), left(g₀) and their derivatives (…, index of (x₀, f₀)).
+            R = Rv.reshape(m + n, n)[m:]
+            L = Lv.reshape(m + n, n)[m:]
+            dR = DR.reshape(m + n, n, m + n)[m:]
+            dL = DL.reshape(m + n, n, m + n)[m:]
+            p = np.linalg.solve(R.T, P1)
+            # Rᵀp = P₁  ⇒  Rᵀ dp = dP₁ − (dR)ᵀ p.
+            dRtp = np.zeros((n, d))
+            dRtp[:, :m + n] = np.einsum("iak,i->ak", dR, p)
+            Dp = np.linalg.solve(R.T, DP1 - dRtp)
+            nu = P0 - L.T @ p
+            dLtp = np.zeros((n, d))
+            dLtp[:, :m + n] = np.einsum("iak,i->ak", dL, p)
+            Dnu = DP0 - dLtp - L.T @ Dp
+            Df = np.eye(d)[m:m + n]
+            return (np.concatenate([x0, nu, s[m:m + n], p]), np.vstack([Dx, Dnu, Df, Dp]))
+        # Order r ≥ 3: the chart (x₀, f₀, …, f_{r−2}) of the first r nodes. Node i's
+        # variation η_i moves f_{i−1} by R_{i−1}η_i and f_i by L_iη_i (x₀ by node 0's
+        # only), so Σ P_i·η_i = ν·η₀ + Σ_j p_j·df_j gives P_{r−1} = R_{r−2}ᵀp_{r−2},
+        # P_i = R_{i−1}ᵀp_{i−1} + L_iᵀp_i (0 < i < r−1) and P₀ = ν + L₀ᵀp₀.
+        Ps = [P[i * n:(i + 1) * n] for i in range(r)]
+        DPs = [DP[i * n:(i + 1) * n] for i in range(r)]
+        eye = np.eye(d)
+        parts, x, Dxj = [], x0, Dx
+        for j in range(r - 1):             # g_j = (x_j, f_j), x_{j+1} = β(g_j)
+            f, Df = s[m + j * n:m + (j + 1) * n], eye[m + j * n:m + (j + 1) * n]
+            element, Dg = np.concatenate([x, f]), np.vstack([Dxj, Df])
+            parts.append(self._element_variations(element, Dg))
+            if j < r - 2:
+                x, T = self._target(element)
+                Dxj = T @ Dg
+        ps, Dps = [None] * (r - 1), [None] * (r - 1)
+        rhs, Drhs = Ps[r - 1], DPs[r - 1]
+        for j in reversed(range(r - 1)):
+            R, L, dR, dL = parts[j]
+            # R_jᵀ p_j = rhs  ⇒  R_jᵀ dp_j = d(rhs) − (dR_j)ᵀ p_j
+            ps[j] = np.linalg.solve(R.T, rhs)
+            Dps[j] = np.linalg.solve(R.T, Drhs - np.einsum("iak,i->ak", dR, ps[j]))
+            # the next equation's right-hand side: P_j − L_jᵀ p_j (ν for j = 0)
+            rhs = Ps[j] - L.T @ ps[j]
+            Drhs = DPs[j] - np.einsum("iak,i->ak", dL, ps[j]) - L.T @ Dps[j]
+        nu, Dnu = rhs, Drhs
+        Df = np.eye(d)[m:m + (r - 1) * n]
+        return (np.concatenate([x0, nu, s[m:m + (r - 1) * n]] + ps),
+                np.vstack([Dx, Dnu, Df] + Dps))
 
     def poisson(self, y: np.ndarray) -> np.ndarray:
         """Π(y): the structure the Hamiltonian coordinates carry (module docstring)."""
@@ -245,8 +299,9 @@ class StepMap:
         P = linear_poisson(y[m:m + n], anchor, structure, self.sign)
         if self.r == 1:
             return P
-        return np.block([[P, np.zeros((m + n, 2 * n))],
-                         [np.zeros((2 * n, m + n)), canonical_poisson(n)]])
+        k = (self.r - 1) * n            # the elements f₀ … f_{r−2} and their momenta
+        return np.block([[P, np.zeros((m + n, 2 * k))],
+                         [np.zeros((2 * k, m + n)), canonical_poisson(k)]])
 
     def state_names(self) -> list[str]:
         """Names of the state coordinates: x0_i (source), f<k>_a (element k's fibre)."""

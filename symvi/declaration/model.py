@@ -18,7 +18,8 @@ import sympy as sp
 from .._runtime.arguments import SIGNS
 from .symbols import h, sign
 from ..errors import ModelError
-from ..groupoids.base import Groupoid
+from ..discretisation.rules import MAX_ORDER
+from ..groupoids.base import Groupoid, step_matrix
 from .rank import generic_rank
 from .symmetry import Symmetry
 from .validation import check_model_name, check_smooth, scalar
@@ -83,12 +84,18 @@ def _sympify_parameters(parameters: Mapping[Any, float]) -> tuple[tuple[sp.Symbo
     return tuple(items)
 
 
+def _order(k: int) -> str:
+    """"first order", "second order", "order 3", … for messages."""
+    return {1: "first order", 2: "second order"}.get(k, f"order {k}")
+
+
 @dataclass(frozen=True, eq=False)
 class Model:
     """A discrete variational model on a Lie groupoid.
 
     Give either a continuous ``lagrangian`` (in the groupoid's continuous symbols, e.g.
-    ``G.q``, ``G.qdot`` and, for second order, ``G.qddot``) together with a
+    ``G.q``, ``G.qdot``, for second order ``G.qddot``, for order k ``G.derivative(k)``;
+    on a Lie group ``G.xi``, ``G.xidot``, ``G.derivative(k − 1)``) together with a
     ``discretisation`` (see :data:`symvi.discretisation.rules.RULES`), or a ``discrete_lagrangian``
     directly (in the groupoid's discrete symbols and :data:`h`) with its ``order``.
 
@@ -99,12 +106,14 @@ class Model:
     groupoid:
         The Lie groupoid the discrete path lives on.
     lagrangian, discretisation:
-        Continuous Lagrangian and the rule that turns it into L_d (DESIGN.md §3). With no
-        discretisation given: ``"midpoint"`` for first order, ``"three_point"`` when the
-        Lagrangian contains accelerations.
+        Continuous Lagrangian and the rule that turns it into L_d (DESIGN.md §3). Its order
+        is that of the highest derivative it contains; with no discretisation given, the
+        groupoid's default for that order: on a pair groupoid ``"midpoint"`` (first
+        order), ``"three_point"`` (accelerations), ``"central<k>"`` (order k ≥ 3).
     discrete_lagrangian, order:
-        A discrete Lagrangian given directly: order 1 (L_d : G → R) or order 2
-        (L_d : G₂ → R, paper §3.1).
+        A discrete Lagrangian given directly: order 1 (L_d : G → R), order 2
+        (L_d : G₂ → R, paper §3.1) or order k ≤ 6 (k composable elements, the k + 1 nodes
+        ``G.nodes(k + 1)`` of a pair groupoid).
     parameters:
         Mapping from parameter symbol (or name) to its default value. Values can be
         changed at run time without recompiling.
@@ -186,19 +195,25 @@ class Model:
             check_smooth(expr, set(allowed) - set(self.parameter_symbols), what)
 
     def groupoid_symbols(self) -> tuple[sp.Symbol, ...]:
-        return self.groupoid.continuous_symbols(2)
+        return self.groupoid.continuous_symbols(self.groupoid.max_order)
 
     def _validate_continuous(self) -> None:
         L = scalar(self.lagrangian, "Lagrangian")
         object.__setattr__(self, "lagrangian", L)
         g = self.groupoid
-        second = [s for s in g.leading_symbols(2) if s in L.free_symbols]
-        name = self.discretisation or g.default_discretisation(2 if second else 1)
+        needed = max((k for k in range(2, MAX_ORDER + 1)
+                      if set(g.leading_symbols(k)) & L.free_symbols), default=1)
+        if needed > g.max_order:
+            top = [str(s) for s in g.leading_symbols(needed) if s in L.free_symbols]
+            raise ModelError(f"the Lagrangian of model {self.name!r} depends on {top} (order "
+                             f"{needed}); {g!r} takes orders up to {g.max_order}")
+        name = self.discretisation or g.default_discretisation(needed)
         rule = g.rule(name)
-        if second and rule.order < 2:
-            raise ModelError(f"the Lagrangian depends on {[str(s) for s in second]} (second "
-                             f"order) but the discretisation {name!r} is first order; use "
-                             f"{g.default_discretisation(2)!r}")
+        if rule.order < needed:
+            top = [str(s) for s in g.leading_symbols(needed) if s in L.free_symbols]
+            raise ModelError(f"the Lagrangian depends on {top} ({_order(needed)}) but the "
+                             f"discretisation {name!r} is {_order(rule.order)}; use "
+                             f"{g.default_discretisation(needed)!r}")
         if self.order is not None and self.order != rule.order:
             raise ModelError(f"order={self.order} contradicts discretisation {name!r} "
                              f"(order {rule.order})")
@@ -210,9 +225,10 @@ class Model:
         self._check_hessian(L, g.leading_symbols(rule.order), allowed)
 
     def _check_hessian(self, L: sp.Expr, highest: Sequence[sp.Symbol], allowed) -> None:
-        """Refuse a degenerate L: ∂²L/∂q̇² (∂²L/∂q̈² for second order) singular everywhere.
+        """Refuse a degenerate L: ∂²L/∂q̇² (∂²L/∂q̈² for second order, ∂²L/∂(q⁽ᵏ⁾)² for
+        order k) singular everywhere.
 
-        Its discretisation would then have D₁₂L_d (D₁₃L_d) singular as h → 0 — not a
+        Its discretisation would then have D₁₂L_d (D₁₃L_d, …) singular as h → 0 — not a
         well-posed step map, even where a rule happens to make it invertible at finite h.
         With constraints Φ the condition is on the bordered Hessian
         [[∂²L/∂v², (∂Φ/∂v)ᵀ], [∂Φ/∂v, 0]] (v the highest derivatives).
@@ -227,7 +243,7 @@ class Model:
         free = [s for s in allowed if s not in self.parameter_symbols]
         rank = generic_rank(hessian, free, dict(self.parameters))
         if rank is not None and rank < hessian.rows:
-            which = "D₁₃L_d" if self.order == 2 else "D₁₂L_d"
+            which = step_matrix(self.order)
             raise ModelError(
                 f"the Lagrangian of model {self.name!r} is not regular: {what} has rank "
                 f"{rank} < {hessian.rows} everywhere, so {which} of the discrete Lagrangian is "
@@ -238,8 +254,12 @@ class Model:
         object.__setattr__(self, "discrete_lagrangian", Ld)
         if self.discretisation is not None:
             raise ModelError("a discrete Lagrangian takes no `discretisation`")
-        if self.order not in (1, 2):
-            raise ModelError(f"a discrete Lagrangian needs order=1 or order=2, got {self.order!r}")
+        top = self.groupoid.max_order
+        if not isinstance(self.order, int) or isinstance(self.order, bool) \
+                or not 1 <= self.order <= top:
+            raise ModelError(f"a discrete Lagrangian on {self.groupoid!r} needs an integer "
+                             f"order from 1 to {top} (the number of elements it spans), got "
+                             f"{self.order!r}")
         allowed = list(self.groupoid.discrete_symbols(self.order)) + [h] \
             + list(self.parameter_symbols)
         self._check_symbols(Ld, allowed, "discrete Lagrangian")

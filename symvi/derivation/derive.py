@@ -371,21 +371,25 @@ def fibre_sources(dm: DiscreteModel) -> tuple[int, ...]:
     action factors: an action's base point Γ_{k+1} = Γ_k·τ(hξ_k) is the source of no
     fibre, so the change of coordinates to increments stays linear); () otherwise,
     and with end conditions other than fixed (their unknown end nodes have no lifted rows
-    yet: the node system solves them at every N).
+    yet: the node system solves them at every N), and for orders above 2 (the lifted rows
+    are written for windows of two elements).
     """
-    return () if dm.inequalities or dm.end_free else increment_sources(dm)
+    if dm.order != 2 or dm.inequalities or dm.end_free:
+        return ()
+    return increment_sources(dm)
 
 
 def increment_sources(dm: DiscreteModel) -> tuple[int, ...]:
     """:func:`fibre_sources` whether or not the model has inequalities: the coordinates
-    whose differences the residual is evaluated from (:func:`_in_increments`). A bounded
+    whose differences the residual is evaluated from (:func:`_in_increments`), for every
+    order from 2 (an order-k residual rounds like ε|q|/h^{2k−1} from the nodes). A bounded
     model has no lifted solve (its window Hessians would need the inequalities'
     multipliers), but its residual needs the differences as much: evaluated from the
     nodes, the cart-pole swing-up's rounded like the unbounded cart-pole's times 10³ at
     N = 1000 in the directions its Newton matrix amplifies (rounding floors 1e-7 against
     1e-10), and its solves ended ILL_CONDITIONED there."""
     g = dm.groupoid
-    if dm.order != 2 or not g.whole_trajectory:
+    if dm.order < 2 or not g.whole_trajectory:
         return ()
     one = _stencil(dm, 1)
     fibre = {s: i for i, s in enumerate(one.fs[0])}

@@ -10,11 +10,17 @@ lists its rules (:meth:`~symvi.groupoids.base.Groupoid.rules`; the first is the 
 """
 from __future__ import annotations
 
+import functools
 import itertools
 from dataclasses import dataclass, field
 from typing import Any, Callable, Sequence
 
 import sympy as sp
+from sympy.calculus.finite_diff import finite_diff_weights
+
+#: The highest order of a Lagrangian (the number of slots of L_d) that the rules here
+#: discretise: L(q, q̇, …, q⁽ᵏ⁾) on a pair groupoid, L(ξ, …, ξ⁽ᵏ⁻¹⁾) on a Lie group.
+MAX_ORDER = 6
 
 Points = list[tuple[sp.Expr, dict]]
 #: (groupoid, xs, fs, h) → weighted points. The groupoid is typed loosely: it is whichever
@@ -63,6 +69,34 @@ def _trapezoid(g, xs, fs, h) -> Points:
     q0, q1 = _nodes(g, xs, fs)
     v = (q1 - q0) / h
     return [(sp.S.Half, g.point(q0, v)), (sp.S.Half, g.point(q1, v))]
+
+
+@functools.lru_cache(maxsize=None)
+def central_weights(times: tuple[sp.Rational, ...], centre: sp.Rational,
+                    derivatives: int) -> tuple[tuple[sp.Rational, ...], ...]:
+    """Row j: the weights of the samples at ``times`` (in units of h) that give the j-th
+    derivative at ``centre`` of their interpolating polynomial (j = 0 … ``derivatives``;
+    SymPy's Fornberg weights), to be divided by h^j."""
+    weights = finite_diff_weights(derivatives, list(times), centre)
+    return tuple(tuple(weights[j][-1]) for j in range(derivatives + 1))
+
+
+def window_derivatives(samples: Sequence[sp.Matrix], first: sp.Rational,
+                       h: sp.Expr) -> list[sp.Matrix]:
+    """The value and derivatives at the window's centre of the polynomial through
+    ``samples``, taken at times (first + j)·h: central differences of order 2 at least
+    (the interpolant of k + 1 equally spaced samples differentiated at their centre)."""
+    k = len(samples) - 1
+    times = tuple(first + j for j in range(k + 1))
+    rows = central_weights(times, first + sp.Rational(k, 2), k)
+    return [sum((w * q for w, q in zip(row, samples)), sp.zeros(*samples[0].shape)) / h**j
+            for j, row in enumerate(rows)]
+
+
+def _central(g, xs, fs, h) -> Points:
+    """L(q, q̇, …, q⁽ᵏ⁾) at the window's centre, kh/2, from the polynomial through its
+    k + 1 nodes (k = 2: q₁, (q₂ − q₀)/2h, (q₂ − 2q₁ + q₀)/h²)."""
+    return [(sp.Integer(1), g.point(*window_derivatives(_nodes(g, xs, fs), sp.S.Zero, h)))]
 
 
 def _three_point(g, xs, fs, h) -> Points:
@@ -114,14 +148,41 @@ LIE = Rule("lie", 1, "Lie group: L_d(w) = h l(xi), xi = tau^-1(w)/h; action grou
 LIE_MIDPOINT = Rule("lie_midpoint", 2, "Lie group: L_d(w0, w1) = h L((xi0+xi1)/2, "
                                        "(xi1-xi0)/h) (paper eq. sdfinal); action groupoid: "
                                        "the base point at the middle node", _lie_midpoint)
+@functools.lru_cache(maxsize=None)
+def central(order: int) -> Rule:
+    """The pair groupoid's rule of ``order`` ≥ 3 (:func:`_central`)."""
+    return Rule(f"central{order}", order,
+                f"pair: L_d(q0, ..., q{order}) = h L at the window's centre, q and its "
+                f"derivatives from the polynomial through the {order + 1} nodes", _central)
+
+
+@functools.lru_cache(maxsize=None)
+def lie_central(order: int) -> Rule:
+    """A Lie group's rule of ``order`` ≥ 3: :func:`_lie_midpoint`'s on ``order`` increments."""
+    return Rule(f"lie_central{order}", order,
+                f"Lie group: L_d(w0, ..., w{order - 1}) = h L(xi, ..., xi^({order - 1})) at the "
+                f"window's centre from the polynomial through its {order} increments xi_j "
+                f"(at the elements' middles)", _lie_midpoint)
+
+
+@functools.lru_cache(maxsize=None)
+def product(order: int) -> Rule:
+    """A product groupoid's rule of ``order``: the tensor product of its factors'."""
+    if order <= 2:
+        return (PRODUCT, PRODUCT2)[order - 1]
+    return Rule(f"product{order}", order, "product groupoid: each factor's default of order "
+                f"{order}, tensor product", _product)
+
+
 PRODUCT = Rule("product", 1, "product groupoid: each factor's first-order default, tensor "
                              "product", _product)
 PRODUCT2 = Rule("product2", 2, "product groupoid: each factor's second-order default, "
                                "tensor product", _product)
 
 #: Every rule, by name.
-RULES: dict[str, Rule] = {r.name: r for r in (MIDPOINT, TRAPEZOID, THREE_POINT, LIE,
-                                              LIE_MIDPOINT, PRODUCT, PRODUCT2)}
+RULES: dict[str, Rule] = {r.name: r for r in (
+    MIDPOINT, TRAPEZOID, THREE_POINT, LIE, LIE_MIDPOINT, PRODUCT, PRODUCT2,
+    *(make(k) for make in (central, lie_central, product) for k in range(3, MAX_ORDER + 1)))}
 
 
 def rule_names() -> list[str]:

@@ -29,6 +29,23 @@ from ..errors import ModelError
 from ..discretisation.rules import RULES, Rule, rule_names
 
 
+def derivative_name(name: str, k: int) -> str:
+    """Name of the k-th time derivative of the coordinate ``name``: ``x``, ``x_dot``,
+    ``x_ddot``, ``x_dddot``, then ``x_d4``, … (the symbols of Lagrangians of order k)."""
+    return name + (("", "_dot", "_ddot", "_dddot")[k] if k < 4 else f"_d{k}")
+
+
+def subscript(number: int) -> str:
+    """``number`` in subscript digits, for messages (12 → ₁₂)."""
+    return str(number).translate(str.maketrans("0123456789", "₀₁₂₃₄₅₆₇₈₉"))
+
+
+def step_matrix(order: int) -> str:
+    """D₁₂L_d, D₁₃L_d, …: the mixed derivative of L_d in its first and last nodes, whose
+    invertibility defines the step map of ``order``."""
+    return f"D₁{subscript(order + 1)}L_d"
+
+
 def _shape(value, expected: tuple[int, ...], what: str) -> None:
     shape = np.shape(value)
     if shape != expected:
@@ -73,6 +90,10 @@ class Groupoid(ABC):
 
     #: Short name of the groupoid kind, stored in generated modules' metadata.
     kind: str = "abstract"
+    #: The highest order of Lagrangian declared on this groupoid (the number of slots of
+    #: its L_d): 2 unless a groupoid's rules and symbols go further (at most
+    #: :data:`symvi.discretisation.rules.MAX_ORDER`).
+    max_order: int = 2
 
     @property
     @abstractmethod
@@ -116,7 +137,7 @@ class Groupoid(ABC):
 
     def rule(self, name: str) -> Rule:
         """The rule of this groupoid called ``name``; a ModelError for any other name."""
-        mine = {r.name: r for order in (1, 2) for r in self.rules(order)}
+        mine = {r.name: r for order in range(1, self.max_order + 1) for r in self.rules(order)}
         if name in mine:
             return mine[name]
         if name in RULES:
@@ -262,7 +283,7 @@ class Groupoid(ABC):
 
     def step_matrix_name(self, order: int) -> str:
         """The matrix that defines the step map (regularity), for messages."""
-        return {1: "D₁₂L_d", 2: "D₁₃L_d"}[order] + " analogue"
+        return f"{step_matrix(order)} analogue"
 
     def preserved_structure(self, order: int) -> str:
         """The structure the step map of ``order`` preserves (paper §4.3), for messages."""

@@ -25,10 +25,10 @@ import numpy as np
 import sympy as sp
 
 from ..errors import ModelError
-from ..discretisation.rules import LIE, LIE_MIDPOINT
+from ..discretisation.rules import LIE, LIE_MIDPOINT, MAX_ORDER, lie_central, window_derivatives
 from . import analytic
 from . import retraction as _retraction
-from .base import Algebroid, Groupoid, _shape
+from .base import Algebroid, Groupoid, _shape, derivative_name
 
 
 def _symbol_names(names, n: int, default: str) -> tuple[str, ...]:
@@ -52,7 +52,8 @@ class MatrixLieGroup(Groupoid):
         close under the commutator (checked exactly).
     names:
         Names of the coordinates ξ_a (continuous symbols ``xi``; second-order models also
-        use ``xidot``).
+        use ``xidot``, a model of order k the derivatives ``derivative(j)`` = ξ⁽ʲ⁾ up to
+        j = k − 1: ``<name>_ddot``, ``<name>_dddot``, ``<name>_d4``, …).
     label:
         Name of the group for messages and fingerprints.
     retraction:
@@ -60,6 +61,7 @@ class MatrixLieGroup(Groupoid):
     """
 
     kind = "lie"
+    max_order = MAX_ORDER
     whole_trajectory = True
     sampling_text = "increments ξ_i = y(t + (i + ½)h) (element midpoints)"
     structure_check = True
@@ -252,24 +254,38 @@ class MatrixLieGroup(Groupoid):
     def predictor(self, xs, fs):
         return tuple(2 * a - b for a, b in zip(fs[-1], fs[-2])) if len(fs) > 1 else tuple(fs[-1])
 
+    def derivative(self, j: int) -> tuple[sp.Symbol, ...]:
+        """The symbols of ξ⁽ʲ⁾: ``xi``, ``xidot``, then ``<name>_ddot``, ``<name>_dddot``,
+        ``<name>_d4``, … (:func:`derivative_name`)."""
+        if j < 2:
+            return (self.xi, self.xidot)[j]
+        return tuple(sp.Symbol(derivative_name(n, j), real=True) for n in self.names)
+
     def continuous_symbols(self, order):
-        return self.xi + (self.xidot if order == 2 else ())
+        return tuple(s for j in range(order) for s in self.derivative(j))
 
     def leading_symbols(self, order):
-        return self.xidot if order == 2 else self.xi
+        return self.derivative(order - 1)
 
     def rules(self, order):
+        if order >= 3:
+            return (lie_central(order),)
         return (LIE_MIDPOINT,) if order == 2 else (LIE,)
 
     def step_scaled(self):
         return (True,) * self.fibre_dim
 
     def algebra_point(self, fs, h) -> dict:
-        """ξ (and ξ̇ for two slots) of the rules ``lie`` and ``lie_midpoint``."""
+        """ξ, ξ̇, …, ξ⁽ᵏ⁻¹⁾ of the rules ``lie``, ``lie_midpoint`` and ``lie_central<k>`` on
+        k slots: the polynomial through the increments ξ_j, at the elements' middles
+        (j + ½)h, at the window's centre kh/2 (k = 2: (ξ₀ + ξ₁)/2, (ξ₁ − ξ₀)/h)."""
         if len(fs) == 1:
             return dict(zip(self.xi, fs[0]))
-        x0, x1 = sp.Matrix(fs[0]), sp.Matrix(fs[1])
-        return dict(zip(self.xi, (x0 + x1) / 2)) | dict(zip(self.xidot, (x1 - x0) / h))
+        if len(fs) == 2:
+            x0, x1 = sp.Matrix(fs[0]), sp.Matrix(fs[1])
+            return dict(zip(self.xi, (x0 + x1) / 2)) | dict(zip(self.xidot, (x1 - x0) / h))
+        values = window_derivatives([sp.Matrix(f) for f in fs], sp.S.Half, h)
+        return {s: v for j, column in enumerate(values) for s, v in zip(self.derivative(j), column)}
 
     def matrix_groups(self):
         return (self,)
@@ -298,7 +314,8 @@ class MatrixLieGroup(Groupoid):
         return (None,) * self.fibre_dim          # ξ at the element's middle
 
     def equation_setting(self, order):
-        return "Euler–Poincaré" if order == 1 else "second-order Euler–Poincaré"
+        return "Euler–Poincaré" if order == 1 else f"order-{order} Euler–Poincaré" if order > 2 \
+            else "second-order Euler–Poincaré"
 
     def preserved_structure(self, order):
         if order == 1:

@@ -6,8 +6,8 @@ from typing import Sequence
 import sympy as sp
 
 from ..errors import ModelError
-from ..discretisation.rules import MIDPOINT, THREE_POINT, TRAPEZOID
-from .base import Algebroid, Groupoid, _shape
+from ..discretisation.rules import MAX_ORDER, MIDPOINT, THREE_POINT, TRAPEZOID, central
+from .base import Algebroid, Groupoid, _shape, derivative_name, step_matrix
 
 
 def _names(coordinates: str | Sequence[str]) -> tuple[str, ...]:
@@ -32,8 +32,11 @@ class PairGroupoid(Groupoid):
     D₁L_d(q_k, q_{k+1}) + D₂L_d(q_{k−1}, q_k) = 0 and, for second order, eq. ``dsoel``.
 
     Symbols for declaring Lagrangians: ``q`` (coordinates), ``qdot`` (velocities),
-    ``qddot`` (accelerations) and, for a discrete Lagrangian given directly,
-    ``nodes(k)`` — the coordinates of the k+1 nodes q_0, …, q_k of one window.
+    ``qddot`` (accelerations), ``derivative(j)`` (q⁽ʲ⁾ for any j ≤ 6: ``x_dddot``,
+    ``x_d4``, …, for a Lagrangian of order j; ``derivative(1)`` is ``qdot``) and, for a
+    discrete Lagrangian
+    given directly, ``nodes(k)`` — the coordinates of the k+1 nodes q_0, …, q_k of one
+    window (order k).
 
     Parameters
     ----------
@@ -46,6 +49,7 @@ class PairGroupoid(Groupoid):
     elements_are_node_pairs = True
     sampling_text = "nodes q_j = q(t + jh)"
     structure_check = True
+    max_order = MAX_ORDER
 
     def __init__(self, coordinates: str | Sequence[str]):
         self.names = _names(coordinates)
@@ -73,19 +77,29 @@ class PairGroupoid(Groupoid):
         """Nodes q_0, q_1, … of a window of consecutive elements (x_j, f_j)."""
         return [tuple(xs[0])] + [tuple(f) for f in fs]
 
+    def derivative(self, j: int) -> tuple[sp.Symbol, ...]:
+        """The symbols of q⁽ʲ⁾: ``q``, ``qdot``, ``qddot``, then ``<name>_dddot``,
+        ``<name>_d4``, … (:func:`derivative_name`)."""
+        known = (self.q, self.qdot, self.qddot)
+        if j < len(known):
+            return known[j]
+        return tuple(sp.Symbol(derivative_name(n, j), real=True) for n in self.names)
+
     def continuous_symbols(self, order):
-        return self.q + self.qdot + (self.qddot if order == 2 else ())
+        return tuple(s for j in range(order + 1) for s in self.derivative(j))
 
     def leading_symbols(self, order):
-        return self.qddot if order == 2 else self.qdot
+        return self.derivative(order)
 
     def rules(self, order):
+        if order >= 3:
+            return (central(order),)
         return (THREE_POINT,) if order == 2 else (MIDPOINT, TRAPEZOID)
 
-    def point(self, q, v, a=None) -> dict:
-        """The substitution q, q̇ (, q̈) → the given values: a quadrature point."""
-        point = dict(zip(self.q, q)) | dict(zip(self.qdot, v))
-        return point | dict(zip(self.qddot, a)) if a is not None else point
+    def point(self, *derivatives) -> dict:
+        """The substitution q, q̇, … → the given values: a quadrature point."""
+        return {s: v for j, values in enumerate(derivatives)
+                for s, v in zip(self.derivative(j), values)}
 
     def discrete_symbols(self, order):
         return tuple(s for node in self.nodes(order + 1) for s in node)
@@ -154,7 +168,7 @@ class PairGroupoid(Groupoid):
         return "on TQ"
 
     def step_matrix_name(self, order):
-        return {1: "D₁₂L_d", 2: "D₁₃L_d"}[order]
+        return step_matrix(order)
 
     def preserved_structure(self, order):
         if order == 1:

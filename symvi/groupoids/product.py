@@ -11,7 +11,7 @@ import itertools
 import sympy as sp
 
 from ..errors import ModelError
-from ..discretisation.rules import PRODUCT, PRODUCT2
+from ..discretisation.rules import product
 from .base import Algebroid, Groupoid, _shape, block_algebroid
 
 
@@ -25,6 +25,7 @@ class ProductGroupoid(Groupoid):
         if len(factors) < 2 or not all(isinstance(f, Groupoid) for f in factors):
             raise ModelError("ProductGroupoid needs two or more symvi groupoids")
         self._factors = tuple(factors)
+        # a clash of names is one of the coordinates' (higher derivatives take their names)
         symbols = [s for f in factors for s in f.continuous_symbols(2)]
         repeated = sorted({str(s) for s in symbols if symbols.count(s) > 1})
         if repeated:
@@ -35,6 +36,11 @@ class ProductGroupoid(Groupoid):
 
     def __repr__(self) -> str:
         return " × ".join(map(repr, self.factors))
+
+    @property
+    def max_order(self) -> int:
+        """The highest order every factor takes."""
+        return min(f.max_order for f in self.factors)
 
     def _split(self, values, sizes) -> list[tuple]:
         values, out = tuple(values), []
@@ -158,7 +164,7 @@ class ProductGroupoid(Groupoid):
         return tuple(s for f in self.factors for s in f.leading_symbols(order))
 
     def rules(self, order):
-        return (PRODUCT2,) if order == 2 else (PRODUCT,)
+        return (product(order),)
 
     def step_scaled(self):
         return tuple(s for f in self.factors for s in f.step_scaled())

@@ -1,0 +1,164 @@
+"""Lagrangians of order k > 2 (issue 25, part 2): exact discrete solutions, the banded
+whole-trajectory solve, its honesty about conditioning, and bad input.
+
+Minimum jerk (k = 3) and minimum snap (k = 4) on the pair groupoid: L = ½|q⁽ᵏ⁾|², whose
+Euler–Lagrange equation is q⁽²ᵏ⁾ = 0. The rule ``central<k>`` takes q⁽ᵏ⁾ on a window of
+k + 1 nodes as their k-th difference over hᵏ, so the discrete equation at a node is the
+2k-th difference of the nodes = 0: samples of any polynomial of degree 2k − 1 are exact
+discrete solutions, for the step map and for the whole-trajectory solve.
+
+On SO(3) and SE(3), L = ½ ξ⁽ᵏ⁻¹⁾ᵀ I ξ⁽ᵏ⁻¹⁾: the gradient of the action sum in each
+increment ξ_j is a (2k − 2)-th difference of the increments, which vanishes when they
+sample a polynomial of degree 2k − 3 — so those increments solve the discrete
+Euler–Poincaré equations exactly, whatever the group's trivialisation terms.
+
+The variational oracle (tests/test_oracle.py, tests/test_lie_groups.py) and the
+consistency check (tests/test_checks_order_k.py) cover the same models.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import sympy as sp
+
+from symvi import SO3, ActionGroupoid, Model, ModelError, PairGroupoid, h
+from symvi.models import get
+
+EXACT = 1e-10
+
+
+def _polynomial(coefficients: np.ndarray):
+    """t ↦ the rows of np.polyval of each column of ``coefficients``."""
+    return lambda t: np.stack([np.polyval(c, t) for c in coefficients.T], axis=1)
+
+
+@pytest.mark.parametrize("name", ["minimum_jerk", "minimum_snap"])
+def test_polynomials_of_degree_2k_minus_1_are_exact(name, compiled):
+    model, mod = get(name), compiled(name)
+    k = model.order
+    q = _polynomial(np.random.default_rng(k).standard_normal((2 * k, 3)))
+    # the step map from the first 2k nodes; its rounding grows like n^(2k−1), so a short run
+    n, step = 12, 1 / 12
+    t = np.arange(n + 1) * step
+    run = mod.integrate(q(t[:2 * k]), n, step)
+    assert run.success, run.message
+    assert np.abs(run.x - q(t)).max() <= EXACT * np.abs(q(t)).max()
+    # the whole-trajectory solve between the first and last k nodes, from a poor start
+    n, step = 40, 1 / 40
+    t = np.arange(n + 1) * step
+    solve = mod.solve_bvp(q(t[:k]), q(t[-k:]), n, step)
+    assert solve.success, solve.message
+    assert np.abs(solve.x - q(t)).max() <= EXACT * np.abs(q(t)).max()
+    # and the path is not a polynomial of lower degree: the top coefficient matters
+    assert np.abs(np.diff(q(t), 2 * k - 1, axis=0)).max() > 1e-9
+
+
+@pytest.mark.parametrize("name", ["so3_jerk", "se3_snap"])
+def test_polynomial_increments_are_exact_on_the_group(name, compiled):
+    model, mod = get(name), compiled(name)
+    k, dim = model.order, model.groupoid.fibre_dim
+    xi = _polynomial(0.4 * np.random.default_rng(k).standard_normal((2 * k - 2, dim)))
+    n, step = 16, 1 / 16
+    middles = (np.arange(n) + 0.5) * step
+    g0 = np.eye(model.groupoid.matrix_dim)
+    run = mod.integrate((g0, xi(middles[:2 * k - 1])), n, step)
+    assert run.success, run.message
+    assert np.abs(run.f - xi(middles)).max() <= EXACT * np.abs(xi(middles)).max()
+    # the solve between the first and last k configurations finds the same increments
+    solve = mod.solve_bvp(run.g[:k], run.g[-k:], n, step)
+    assert solve.success, solve.message
+    assert np.abs(solve.f - xi(middles)).max() <= EXACT * np.abs(xi(middles)).max()
+    assert np.ptp(run.f, axis=0).max() > 0.1       # the increments do vary
+
+
+def test_band_grows_with_the_order_not_with_n(compiled):
+    """The whole-trajectory Newton matrix of an order-k model couples nodes within k of
+    each other: n(k + 1) − 1 diagonals on either side, whatever N."""
+    for name in ("cubic_spline", "minimum_jerk", "minimum_snap", "so3_jerk", "se3_snap"):
+        model, lib = get(name), compiled(name).model.lib
+        n, k = model.groupoid.fibre_dim, model.order
+        assert lib.symvi_bvp_bandwidth() == n * (k + 1) - 1, name
+        assert lib.symvi_bvp_unknowns(1000) - lib.symvi_bvp_unknowns(100) == 900 * n
+
+
+def test_conditioning_is_reported_not_hidden(compiled):
+    """κ grows like N^{2k}: minimum jerk at N = 1000 still converges to the exact quintic,
+    minimum snap at N = 1000 (κ ≈ 10²⁴) cannot reach xtol and says so — never SUCCESS with
+    a wrong path."""
+    for name, expect_success in (("minimum_jerk", True), ("minimum_snap", False)):
+        model, mod = get(name), compiled(name)
+        k = model.order
+        q = _polynomial(np.random.default_rng(1).standard_normal((2 * k, 3)))
+        n = 1000
+        t = np.arange(n + 1) / n
+        solve = mod.solve_bvp(q(t[:k]), q(t[-k:]), n, 1 / n)
+        error = np.abs(solve.x - q(t)).max()
+        if solve.success:
+            assert error <= 1e-8 * np.abs(q(t)).max(), (name, error, solve.message)
+        assert solve.success == expect_success, (name, solve.message)
+        if not expect_success:
+            assert "conditioning" in solve.message or "rounding" in solve.message
+
+
+# -- declarations ---------------------------------------------------------------------------
+def test_order_and_rule_follow_the_highest_derivative():
+    G = PairGroupoid("x y")
+    x3, y3 = G.derivative(3)
+    assert (str(x3), str(y3)) == ("x_dddot", "y_dddot") and G.derivative(2) == G.qddot
+    m = Model("jerk_decl", G, lagrangian=(x3**2 + y3**2) / 2 + G.q[0]**2)
+    assert (m.order, m.discretisation) == (3, "central3")
+    S = SO3()
+    m = Model("so3_snap_decl", S, lagrangian=sum(v**2 for v in S.derivative(3)) / 2)
+    assert (m.order, m.discretisation) == (4, "lie_central4")
+
+
+def test_central_rule_samples_the_interpolant_at_the_centre():
+    """central3 on nodes of a cubic gives its exact value and derivatives at t = 3h/2."""
+    G = PairGroupoid("x")
+    m = Model("jerk_rule", G, lagrangian=G.derivative(3)[0]**2 / 2 + G.q[0] * G.qdot[0]
+              + G.qddot[0] ** 2)
+    from symvi.discretisation.rules import central
+    t = sp.Symbol("t")
+    cubic = 2 - t + 3 * t**2 - 5 * t**3
+    nodes = [(cubic.subs(t, j * h),) for j in range(4)]
+    (weight, point), = central(3).quadrature(G, [nodes[0]], nodes[1:], h)
+    centre = 3 * h / 2
+    for j in range(4):
+        expected = sp.diff(cubic, t, j).subs(t, centre)
+        assert sp.simplify(point[G.derivative(j)[0]] - expected) == 0, j
+    assert weight == 1 and m.order == 3
+
+
+@pytest.mark.parametrize("build, pattern", [
+    # degenerate in the top derivative: y''' missing from L
+    (lambda G: Model("bad_jerk", G, lagrangian=G.derivative(3)[0]**2 / 2 + G.qdot[1]**2),
+     r"not regular.*rank 1 < 2.*D₁₄L_d"),
+    # the Lagrangian's order against the rule's
+    (lambda G: Model("bad_rule", G, lagrangian=G.derivative(3)[0]**2 + G.derivative(3)[1]**2,
+                     discretisation="three_point"),
+     r"depends on \['x_dddot', 'y_dddot'\] \(order 3\) but the discretisation 'three_point' is "
+     r"second order; use 'central3'"),
+    (lambda G: Model("bad_rule", G, lagrangian=G.derivative(3)[0]**2 + G.derivative(3)[1]**2,
+                     order=4),
+     r"order=4 contradicts discretisation 'central3' \(order 3\)"),
+    # a discrete Lagrangian whose nodes do not match its order
+    (lambda G: Model("bad_nodes", G, discrete_lagrangian=sum(
+        (a - 3 * b + 3 * c - d)**2 for (a, _), (b, _), (c, _), (d, _) in [G.nodes(4)]),
+        order=2), r"undeclared symbol\(s\) x_3"),
+    (lambda G: Model("bad_order", G, discrete_lagrangian=G.nodes(2)[0][0], order=7),
+     r"needs an integer order from 1 to 6"),
+    (lambda G: Model("bad_order", G, lagrangian=G.derivative(7)[0]**2),
+     r"undeclared symbol\(s\) x_d7"),
+])
+def test_bad_order_k_input_is_refused_with_its_reason(build, pattern):
+    with pytest.raises(ModelError, match=pattern):
+        build(PairGroupoid("x y"))
+
+
+def test_action_groupoids_stay_at_order_two():
+    H = SO3()
+    G = ActionGroupoid(H, "a1 a2 a3", lambda q, W: list(W[:3, :3].T * q),
+                       manifold=lambda q: [q.dot(q) - 1])
+    jerk = sum(v**2 for v in H.derivative(2))
+    with pytest.raises(ModelError, match=r"order 3.*takes orders up to 2"):
+        Model("action_jerk", G, lagrangian=jerk)
