@@ -122,7 +122,8 @@ def _solve(module, ex, steps: int, h: float, params: dict, args):
     for name in ("scipy.linalg", "scipy.sparse.linalg"):
         importlib.import_module(name)
     start = time.perf_counter()
-    result = module.solve_bvp(ex.start, ex.end, steps, h, params)
+    result = module.solve_bvp(ex.start, ex.end, steps, h, params,
+                              guess=ex.guess_nodes(steps, module.model.order))
     elapsed = time.perf_counter() - start
     free = module.model.info.get("free_horizon")
     # a free horizon's T and h are the solve's, not the guess passed in

@@ -20,7 +20,7 @@ import symvi.derivation.derive  # noqa: E402
 from symvi.build import compile_model  # noqa: E402
 from symvi.derivation.derive import derive  # noqa: E402
 from symvi.discretisation.discretise import discretise  # noqa: E402
-from symvi.models import BOUNDED, BUNDLED, CONTROL, get  # noqa: E402
+from symvi.models import BOUNDED, BUNDLED, CONTROL, NONHOLONOMIC, get  # noqa: E402
 
 FIRST_ORDER = ("harmonic_oscillator", "pendulum", "double_pendulum", "robot_arm")
 SECOND_ORDER = ("cubic_spline", "spline_potential")
@@ -35,7 +35,7 @@ LIE = ("rigid_body", "rigid_body_exp", "planar_body", "planar_body_exp", "so3_cu
 ACTION = ("heavy_top", "heavy_top_exp", "spherical_pendulum", "spherical_pendulum_exp",
           "se3_body", "se3_body_exp")
 #: Bundled optimal-control problems (constrained second-order models, whole trajectories).
-assert set(PAIR + LIE + ACTION + CONTROL + BOUNDED) == set(BUNDLED)
+assert set(PAIR + LIE + ACTION + CONTROL + BOUNDED + NONHOLONOMIC) == set(BUNDLED)
 #: Bundled models whose derivation takes longest (seconds of CPU: SE(3) ≈ 20–30, heavy top
 #: ≈ 8, the rest ≤ 5): prebuilt first, so that the pool's threads finish together.
 COSTLIEST = ("se3_body_exp", "se3_body", "heavy_top_exp", "heavy_top",
@@ -164,7 +164,7 @@ def derived(prebuilt):
     return get_derived
 
 
-__all__ = ["BOUNDED", "BUNDLED", "FIRST_ORDER", "SECOND_ORDER", "HIGHER_ORDER", "PAIR", "LIE", "ACTION", "CONTROL"]
+__all__ = ["BOUNDED", "BUNDLED", "NONHOLONOMIC", "FIRST_ORDER", "SECOND_ORDER", "HIGHER_ORDER", "PAIR", "LIE", "ACTION", "CONTROL"]
 
 
 @pytest.fixture

@@ -21,7 +21,7 @@ import numpy as np
 import pytest
 import sympy as sp
 
-from symvi import SO3, ActionGroupoid, Model, ModelError, PairGroupoid, h
+from symvi import SO3, ActionGroupoid, Model, ModelError, PairGroupoid, ProductGroupoid, h
 from symvi.models import get
 
 EXACT = 1e-10
@@ -100,6 +100,24 @@ def test_conditioning_is_reported_not_hidden(compiled):
             assert "conditioning" in solve.message or "rounding" in solve.message
 
 
+def test_slowly_converging_newton_is_not_a_success(compiled):
+    """Minimum jerk from rest at 0 to rest at 1 over N = 2500, h = 3: its Newton matrix is
+    so ill-conditioned that the corrections shrink only by ρ ≈ 0.9 per iteration, leaving
+    an error ρ/(1 − ρ) times the last one. The path must not be SUCCESS unless the exact
+    discrete solution — the quintic in the node index through the six fixed nodes — is
+    within the tolerance (it was once, 8.7 tolerances off)."""
+    mod, n = compiled("minimum_jerk"), 2500
+    res = mod.solve_bvp(np.zeros((3, 3)), np.ones((3, 3)), n, 3.0)
+    fixed = np.r_[0:3, n - 2:n + 1] / n
+    quintic = np.linalg.solve(np.vander(fixed, 6), np.r_[0.0, 0, 0, 1, 1, 1])
+    exact = np.polyval(quintic, np.arange(n + 1) / n)
+    error = np.abs(res.x - exact[:, None]).max()
+    tolerance = 1e-9 * (1 + np.abs(exact).max())
+    assert not res.success or error <= tolerance, (error / tolerance, res.message)
+    if not res.success:     # and the message says why
+        assert "did not converge" in res.message or "rounding" in res.message
+
+
 # -- declarations ---------------------------------------------------------------------------
 def test_order_and_rule_follow_the_highest_derivative():
     G = PairGroupoid("x y")
@@ -148,7 +166,11 @@ def test_central_rule_samples_the_interpolant_at_the_centre():
     (lambda G: Model("bad_order", G, discrete_lagrangian=G.nodes(2)[0][0], order=7),
      r"needs an integer order from 1 to 6"),
     (lambda G: Model("bad_order", G, lagrangian=G.derivative(7)[0]**2),
-     r"undeclared symbol\(s\) x_d7"),
+     r"derivative\(7\): the derivatives of a Lagrangian's symbols go from 0 to 6"),
+    (lambda G: G.derivative(-1), r"derivative\(-1\)"),
+    # a product whose factors' derivative names meet: the pair's w⃛ is the group's ξ₁
+    (lambda G: ProductGroupoid(PairGroupoid("w"), SO3(names="w_dddot b c")),
+     r"share coordinate names \['w_dddot'\]"),
 ])
 def test_bad_order_k_input_is_refused_with_its_reason(build, pattern):
     with pytest.raises(ModelError, match=pattern):

@@ -73,7 +73,8 @@ CHILD = textwrap.dedent("""
     import importlib
     mod = importlib.import_module(spec["name"])
     if "start" in spec:   # a whole-trajectory example (optimal control)
-        r = mod.solve_bvp(spec["start"], spec["end"], spec["n_steps"], spec["h"])
+        r = mod.solve_bvp(spec["start"], spec["end"], spec["n_steps"], spec["h"],
+                          guess=spec.get("guess"))
         final, rows = r.f[-1], r.f.shape[0] + 1
     else:
         initial = spec["initial"]
@@ -102,6 +103,8 @@ def run_standalone(directory: Path, name: str, example) -> dict:
             "h": float(example.h)}
     if example.whole_trajectory:
         spec |= {"start": _as_list(example.start), "end": _as_list(example.end)}
+        if example.guess is not None:     # its first path (a nonholonomic example's)
+            spec["guess"] = _as_list(example.guess_nodes(order=get(name).order))
     else:
         spec["initial"] = _as_list(example.initial)
     env = {k: v for k, v in os.environ.items() if k != "PYTHONPATH"}

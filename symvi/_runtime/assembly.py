@@ -221,11 +221,12 @@ class Problem:
     def _blocks(self, path: Path) -> np.ndarray:
         """The nodes of the C assembler's blocks: each holds a node correction η_t (n
         unknowns, its residual rows) and, with constraints, the multipliers of window
-        t − 1 (s unknowns, the rows of its constraints Φ_d). With an unknown end, to the
-        last node; the end conditions' multipliers ν follow the blocks."""
+        t − 1 (s unknowns, the rows of its constraints Φ_d): nodes r … N − r without
+        constraints, 1 … N − r + 1 with them (a block per window). With an unknown end, to
+        the last node; the end conditions' multipliers ν follow the blocks."""
         r, s = self.model.order, self.model.constraints
-        t0 = r - 1 if s else r
-        return np.arange(t0, path.x.shape[0] - (0 if self.model.end_free else t0))
+        t0, t1 = (1, r - 1) if s else (r, r)
+        return np.arange(t0, path.x.shape[0] - (0 if self.model.end_free else t1))
 
     def constraint_rows(self, path: Path) -> np.ndarray:
         """Mask of the multiplier unknowns (= constraint rows) in the block layout (kept
@@ -255,9 +256,9 @@ class Problem:
         m, s = self.model, self.model.constraints
         blocks = self._blocks(path)
         scaled = m.step_scaled
-        # blocks run from node T0 ≥ 1 to N − T0: the elements before and after each node
-        # exist, so slices (no fancy-index copies) select them; a free end's last node
-        # has no element after it and its block no window
+        # blocks run from node T0 ≥ 1 to N − T1: the elements before each node exist, so
+        # slices (no fancy-index copies) select them; the last node of a free end or of a
+        # first-order constrained model has no element after it
         first, last = int(blocks[0]), int(blocks[-1])
         eta = np.abs(path.f[first - 1:last])
         if scaled.any():

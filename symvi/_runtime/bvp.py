@@ -76,7 +76,10 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
     maxiter, xtol, ftol : SUCCESS when the full Newton correction ‖Δ‖∞ — the estimate
         of the error left in the path (unknowns: node corrections and multipliers) —
         plus the rounding floor below is at most xtol·(1 + size), size the largest
-        unknown (:func:`_within_tolerance`), or when ‖R‖∞ ≤ ftol.
+        unknown (:func:`_within_tolerance`), or when ‖R‖∞ ≤ ftol. The floor counts
+        twice (a sample of the rounding noise can miss its worst direction), and
+        corrections shrinking only linearly, by ρ > ½ per iteration, count as the error
+        ρ/(1 − ρ)·‖Δ‖ they leave.
         Where the residual reaches its rounding level first, its norm is noise: the
         full step is taken if it passes Deuflhard's natural monotonicity test, else
         the cost's descent step is tried; a path whose correction still exceeds the
@@ -392,7 +395,13 @@ def _within_tolerance(problem, state, ab, bw: int, res, delta, size: float,
     off) is caught by the floor; a first small correction that did not halve the one
     before is judged at the next iteration. Where the floor exceeds the tolerance, or a
     non-contracting correction and the floor together do, the path is
-    ``ILL_CONDITIONED``."""
+    ``ILL_CONDITIONED``.
+
+    Corrections that shrink only linearly, by a rate ρ = ‖Δ_k‖/‖Δ_{k−1}‖ in (½, 1) (a
+    Newton matrix so ill-conditioned that its solves are inexact: minimum jerk at
+    N = 2500 took 94 iterations at ρ ≈ 0.91), leave an error ρ/(1 − ρ)·‖Δ‖ after the step,
+    which takes the place of ‖Δ‖: below the tolerance with the floor, SUCCESS; above it,
+    Newton goes on."""
     moved = problem.moved(state, delta, 1.0)    # round-off defeats a line search
     if moved is None:
         return state, None, Status.STALLED, (
@@ -400,15 +409,20 @@ def _within_tolerance(problem, state, ab, bw: int, res, delta, size: float,
     contracting = size <= previous / 2
     if not contracting and previous > tolerance:
         return moved, size, None, ""
+    rate = size / previous
+    slow = not contracting and rate < 1.0
+    error = size * rate / (1.0 - rate) if slow else size
     floor = problem.rounding_correction(ab, bw, state, res)
-    if tolerance / EDGE < size + floor:
+    if tolerance / EDGE < error + MARGIN * floor:
         # near the edge one direction could be luck: two more (each a residual and a
         # solve; always taking them cost rigid_body_oc at N = 1000 4.7 → 5.9 ms)
         floor = max(floor, problem.rounding_correction(ab, bw, state, res, range(1, 3)))
-    if size + floor <= tolerance:
+    if error + MARGIN * floor <= tolerance:
+        linear = (f" (shrinking linearly by {rate:.2f}: error estimate {error:.1e})"
+                  if slow else "")
         return moved, size, Status.SUCCESS, (
-            f"; last Newton correction {size:.1e}, rounding floor {floor:.1e}")
-    if contracting and floor < tolerance:
+            f"; last Newton correction {size:.1e}{linear}, rounding floor {floor:.1e}")
+    if (contracting or slow) and floor < tolerance:
         return moved, size, None, ""
     return moved, size, *_rounding_limited(
         f"the Newton correction ({size:.1e}) is within the tolerance, but with the one "
@@ -420,6 +434,11 @@ def _within_tolerance(problem, state, ab, bw: int, res, delta, size: float,
 #: tolerance, the floor takes two more random directions: across eight, the floors of
 #: cart_pole_oc at N = 1000 varied within 4×.
 EDGE = 4.0
+#: The floor is a sample — the largest of at most three random directions — of a noise
+#: whose worst direction can be larger: SUCCESS asks the correction plus this many floors
+#: to be within the tolerance. An order-5 minimum-jerk-like solve at N = 150 was 4.9 off
+#: with a correction 0.33 and a floor 2.0 under a tolerance 4.0.
+MARGIN = 2.0
 
 
 def _rounding_limited(finding: str, attainable: float, tolerance: float):

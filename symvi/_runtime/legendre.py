@@ -36,9 +36,11 @@ class TransformError(ValueError):
 def state_arrays(model, state) -> tuple[np.ndarray, np.ndarray]:
     """The position x and velocity v of ``state``, checked (x on its manifold)."""
     if model.order != 1 or "legendre" not in model.info["kernels"]:
+        K = model.stencil_elements
+        what = (f"the first {K} nodes, an array ({K}, {model.n})" if model.info["node_pairs"]
+                else f"its first {K - 1} elements")
         raise ValueError(f"model {model.name!r}: a State starts first-order models only "
-                         f"(this one is of order {model.order}); give its first "
-                         f"{model.stencil_elements - 1} elements instead")
+                         f"(this one is of order {model.order}); give {what} instead")
     if not (model.info["node_pairs"] or model.step_scaled.all()):
         raise ValueError(f"model {model.name!r}: a State needs every fibre coordinate to be "
                          f"a node (pair groupoid) or an increment (groups); give the first "

@@ -51,8 +51,8 @@ def _equation(model) -> str:
                 else "E(L) = ∂L/∂q − d/dt ∂L/∂q̇ + d²/dt² ∂L/∂q̈")
     operator = "EL(L)" if r == 1 else "EL₂(L̃)" if r == 2 else \
         f"EL_{r}(L) with P = Σ_{{j<{r}}} (−d/dt)^j ∂L/∂y⁽ʲ⁾"
-    if model.constraints:
-        operator = "EL₂(L̃ + λ_A Φ^A)"
+    if model.constraints:   # first order: the extended Lagrangian of a nonholonomic problem
+        operator = "EL₂(L̃ + λ_A Φ^A)" if r == 2 else "EL(L̃ + λ_A Φ^A)"
     return f"E = −{operator} ({groupoid.equation_setting(r)})"
 
 

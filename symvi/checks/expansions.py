@@ -256,7 +256,8 @@ def _taylor(values: Sequence, offset: sp.Rational, degree: int) -> _Series:
 
 
 def _stencil_atoms(jets: _AlgebroidJets, groupoid, z: Sequence[sp.Symbol], *, elements: int,
-                   centre: int, order: int, degree: int, windows: int, multipliers: int,
+                   centre: int | sp.Rational, order: int, degree: int, windows: int,
+                   multipliers: int,
                    with_multipliers: bool) -> dict[sp.Symbol, _Series]:
     """The sampled stencil coordinates as Taylor polynomials of degree ``degree``."""
     m, n = groupoid.source_dim, groupoid.fibre_dim
@@ -272,16 +273,17 @@ def _stencil_atoms(jets: _AlgebroidJets, groupoid, z: Sequence[sp.Symbol], *, el
             for w in range(windows)]
     layout = _layout(groupoid)
     base = [[jets.base_derivative_poly(i, k) for k in range(degree + 1)] for i in range(m)]
-    atoms = {s: _taylor(base[i], sp.Integer(-centre), degree) for i, s in enumerate(x0)}
+    centre = sp.nsimplify(centre)   # a half-integer: the middle of an odd window
+    atoms = {s: _taylor(base[i], -centre, degree) for i, s in enumerate(x0)}
     for i, f in enumerate(fs):
         for c, s in enumerate(f):
             b = layout[c]
             if b is not None:       # a pair factor: the target node q(t + (i + 1 − c)h)
-                atoms[s] = _taylor(base[b], sp.Integer(i + 1 - centre), degree)
+                atoms[s] = _taylor(base[b], i + 1 - centre, degree)
             else:                   # a group increment: y at the element's middle
-                atoms[s] = _taylor(jets.y[c], sp.Rational(2 * (i - centre) + 1, 2), degree)
-    for w, lam in enumerate(lams):  # multipliers at the window's middle node
-        offset = sp.Rational(2 * (w - centre) + order, 2)
+                atoms[s] = _taylor(jets.y[c], i - centre + sp.S.Half, degree)
+    for w, lam in enumerate(lams):  # multipliers at the window's middle (node or element)
+        offset = w - centre + sp.Rational(order, 2)
         for a, s in enumerate(lam):
             atoms[s] = (_taylor(jets.lam[a], offset, degree) if with_multipliers
                         else _Series({}, _EXACT))
@@ -290,7 +292,7 @@ def _stencil_atoms(jets: _AlgebroidJets, groupoid, z: Sequence[sp.Symbol], *, el
 
 @expansion_scope
 def sample_stencil(groupoid, z: Sequence[sp.Symbol], step: sp.Symbol, *, elements: int,
-                   centre: int, order: int, degree: int, windows: int = 0,
+                   centre: int | sp.Rational, order: int, degree: int, windows: int = 0,
                    multipliers: int = 0, t: sp.Symbol = TIME) -> dict[sp.Symbol, sp.Expr]:
     """The values :func:`expand_stencil` gives the stencil coordinates ``z``: polynomials
     of degree ``degree`` in ``step`` whose coefficients are functions of ``t`` (module doc;
@@ -305,7 +307,7 @@ def sample_stencil(groupoid, z: Sequence[sp.Symbol], step: sp.Symbol, *, element
 
 @expansion_scope
 def expand_stencil(outputs: sp.Matrix, z: Sequence[sp.Symbol], groupoid, step: sp.Symbol, *,
-                   elements: int, centre: int, order: int, through: int,
+                   elements: int, centre: int | sp.Rational, order: int, through: int,
                    definitions: Sequence[tuple[sp.Symbol, sp.Expr]] = (),
                    windows: int = 0, multipliers: int = 0, with_multipliers: bool = True,
                    t: sp.Symbol = TIME) -> ResidualExpansion:
@@ -402,19 +404,18 @@ def constraint_expansion(model: Model, *, derived: DerivedModel | None = None,
                          terms: int = 2, max_power: int = 5,
                          t: sp.Symbol = TIME) -> ResidualExpansion:
     """Expand the discrete constraints Φ_d of a constrained ``model`` on one window of r
-    elements centred at t (its middle node); consistent ones give h·Φ(t) + O(h³)."""
+    elements centred at t (its middle: a node, or an element's midpoint for r = 1);
+    consistent ones give h·Φ(t) + O(h³)."""
     if not model.constraints:
         raise ModelError(f"model {model.name!r} has no constraints")
     dm = derived if derived is not None else derive(discretise(model))
     kernel = dm.kernel("constraint")
     value = dict(kernel.outputs)["value"]
     r = dm.order
-    if r % 2:
-        raise ModelError("a window of an odd number of elements has no middle node")
     through = min(3, max_power)
     while True:
         expansion = expand_stencil(value, kernel.z, model.groupoid, dm.step, elements=r,
-                                   centre=r // 2, order=r, through=through,
+                                   centre=sp.Rational(r, 2), order=r, through=through,
                                    definitions=kernel.definitions, t=t)
         if len(expansion.terms) >= terms or through >= max_power:
             return expansion

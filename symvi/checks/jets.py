@@ -104,14 +104,9 @@ def _replace_functions(expr, t: sp.Symbol, jet):
 
 
 def derivative_levels(groupoid, order: int) -> list[tuple[sp.Symbol, ...]]:
-    """The symbols of q, q̇, …, q⁽ʳ⁾ (r = ``order``) of a pair groupoid's Lagrangians:
-    ``groupoid.derivative(j)`` where the groupoid has it (``q``, ``qdot``, ``qddot``, then
-    ``<name>_d<j>``), else its ``q``, ``qdot``, ``qddot``."""
-    if hasattr(groupoid, "derivative"):
-        return [tuple(groupoid.derivative(j)) for j in range(order + 1)]
-    if order > 2:
-        raise ModelError(f"{groupoid!r} has no symbols for derivatives of order {order}")
-    return [tuple(groupoid.q), tuple(groupoid.qdot), tuple(groupoid.qddot)][: order + 1]
+    """The symbols of q, q̇, …, q⁽ʳ⁾ (r = ``order``) of a pair groupoid's Lagrangians
+    (``groupoid.derivative(j)``: ``q``, ``qdot``, ``qddot``, then ``<name>_dddot``, …)."""
+    return [tuple(groupoid.derivative(j)) for j in range(order + 1)]
 
 
 def _variational_derivative(groupoid, lagrangian: sp.Expr, order: int, jets: _Jets) -> sp.Matrix:
@@ -160,20 +155,11 @@ def fibre_levels(groupoid, algebroid=None) -> list[tuple[sp.Symbol, ...]]:
 
     y and ẏ are the algebroid's ``y`` and ``ydot``; y⁽ʲ⁾ is the groupoid's leading symbol
     of order j + 1 (``leading_symbols(j + 1)``: ξ⁽ʲ⁾ on a Lie group, q⁽ʲ⁺¹⁾ on a pair
-    groupoid, the factors' in a product), used only where its orders 1 and 2 are the
-    algebroid's y and ẏ."""
+    groupoid, the factors' in a product; its orders 1 and 2 are the algebroid's y and ẏ)."""
     a = algebroid if algebroid is not None else groupoid.algebroid()
-    levels = [tuple(a.y), tuple(a.ydot)]
-    top = getattr(groupoid, "max_order", 2)
-    if top <= 2:
-        return levels
-    try:
-        leading = [tuple(groupoid.leading_symbols(j + 1)) for j in range(top)]
-    except (ModelError, NotImplementedError, KeyError, IndexError):
-        return levels
-    if leading[0] != levels[0] or leading[1] != levels[1]:
-        return levels
-    return leading
+    if groupoid.max_order <= 2:
+        return [tuple(a.y), tuple(a.ydot)]
+    return [tuple(groupoid.leading_symbols(j + 1)) for j in range(groupoid.max_order)]
 
 
 def component_names(groupoid) -> tuple[str, ...]:

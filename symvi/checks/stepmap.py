@@ -239,28 +239,7 @@ class StepMap:
         Dx = np.eye(d)[:m]
         if r == 1:
             return np.concatenate([x0, P]), np.vstack([Dx, DP])
-        if r == 2:
-            P0, P1, DP0, DP1 = P[:n], P[n:2 * n], DP[:n], DP[n:2 * n]
-            element = s[:m + n]
-            Rv, DR = self._right(element)
-            Lv, DL = self._left(element)
-            # Fibre rows of right(g₀), left(g₀) and their derivatives (…, index of (x₀, f₀)).
-            R = Rv.reshape(m + n, n)[m:]
-            L = Lv.reshape(m + n, n)[m:]
-            dR = DR.reshape(m + n, n, m + n)[m:]
-            dL = DL.reshape(m + n, n, m + n)[m:]
-            p = np.linalg.solve(R.T, P1)
-            # Rᵀp = P₁  ⇒  Rᵀ dp = dP₁ − (dR)ᵀ p.
-            dRtp = np.zeros((n, d))
-            dRtp[:, :m + n] = np.einsum("iak,i->ak", dR, p)
-            Dp = np.linalg.solve(R.T, DP1 - dRtp)
-            nu = P0 - L.T @ p
-            dLtp = np.zeros((n, d))
-            dLtp[:, :m + n] = np.einsum("iak,i->ak", dL, p)
-            Dnu = DP0 - dLtp - L.T @ Dp
-            Df = np.eye(d)[m:m + n]
-            return (np.concatenate([x0, nu, s[m:m + n], p]), np.vstack([Dx, Dnu, Df, Dp]))
-        # Order r ≥ 3: the chart (x₀, f₀, …, f_{r−2}) of the first r nodes. Node i's
+        # Order r ≥ 2: the chart (x₀, f₀, …, f_{r−2}) of the first r nodes. Node i's
         # variation η_i moves f_{i−1} by R_{i−1}η_i and f_i by L_iη_i (x₀ by node 0's
         # only), so Σ P_i·η_i = ν·η₀ + Σ_j p_j·df_j gives P_{r−1} = R_{r−2}ᵀp_{r−2},
         # P_i = R_{i−1}ᵀp_{i−1} + L_iᵀp_i (0 < i < r−1) and P₀ = ν + L₀ᵀp₀.

@@ -13,6 +13,7 @@ import math
 from dataclasses import dataclass, field
 from typing import Any, Mapping, Sequence
 
+import numpy as np
 import sympy as sp
 
 from .._runtime.arguments import SIGNS
@@ -36,7 +37,11 @@ class Example:
     with h); ``initial`` is then the node form of about the same start at the step ``h``.
     A whole-trajectory example (optimal control) gives the boundary data ``start`` and
     ``end`` of ``solve_bvp`` instead — :class:`symvi.State` s at t = 0 and t = N·h, or the
-    fixed nodes (``end`` None with end conditions) — with ``n_steps`` = N.
+    fixed nodes (``end`` None with end conditions) — with ``n_steps`` = N. Its ``guess``,
+    if given, is a function of the normalised times s = k/N of the free nodes (an array)
+    returning their coordinates (len(s), m): a first path for problems whose straight line
+    between the ends is a degenerate start (nonholonomic parking: a sideways move has no
+    first-order gradient there).
     """
 
     initial: Any = None
@@ -45,6 +50,15 @@ class Example:
     start: Any = None
     end: Any = None
     state: Any = None
+    guess: Any = None
+
+    def guess_nodes(self, n_steps: int | None = None, order: int = 1) -> Any:
+        """``guess`` at the free nodes r … N − r of N = ``n_steps`` (default the example's)
+        steps, or None when the example gives no guess."""
+        if self.guess is None:
+            return None
+        N = self.n_steps if n_steps is None else n_steps
+        return self.guess(np.arange(order, N - order + 1) / N)
 
     @property
     def run_from(self) -> Any:
@@ -120,11 +134,12 @@ class Model:
     example:
         Optional default run (:class:`Example`).
     constraints:
-        Second-order constraints Φ^A = 0 on the path (paper §3.2), written like the
-        Lagrangian (continuous, discretised by the same rule as h Σ w Φ(point), or
-        discrete); each window of the action sum gets its multipliers λ^k_A and the
-        augmented L_d + λ^k_A Φ^A_d is made stationary (eq. ``constrainedso``). Constrained
-        models are solved as whole trajectories (``solve_bvp``).
+        Constraints Φ^A = 0 on the path of a first- or second-order model (paper §3.2),
+        written like the Lagrangian (continuous, discretised by the same rule as
+        h Σ w Φ(point), or discrete); each window of the action sum (an element at first
+        order) gets its multipliers λ^k_A and the augmented L_d + λ^k_A Φ^A_d is made
+        stationary (eq. ``constrainedso``). Constrained models are solved as whole
+        trajectories (``solve_bvp``).
     controls:
         Continuous expressions evaluated at each window's quadrature point and returned
         by ``solve_bvp`` (an optimal-control problem's u = EL(L)_a; see
@@ -201,8 +216,13 @@ class Model:
         L = scalar(self.lagrangian, "Lagrangian")
         object.__setattr__(self, "lagrangian", L)
         g = self.groupoid
+        # past the groupoid's orders only symbols it has no use for count (a groupoid
+        # written for orders 1 and 2 may answer any other order with its first-order ones)
+        own = set(g.continuous_symbols(g.max_order))
         needed = max((k for k in range(2, MAX_ORDER + 1)
-                      if set(g.leading_symbols(k)) & L.free_symbols), default=1)
+                      if set(g.leading_symbols(k)) & L.free_symbols
+                      and (k <= g.max_order or not set(g.leading_symbols(k)) <= own)),
+                     default=1)
         if needed > g.max_order:
             top = [str(s) for s in g.leading_symbols(needed) if s in L.free_symbols]
             raise ModelError(f"the Lagrangian of model {self.name!r} depends on {top} (order "
@@ -282,10 +302,11 @@ class Model:
                 self._check_symbols(e, self._allowed_symbols(), f"{field_name[:-1]} {i}",
                                     smooth=field_name == "constraints")
             object.__setattr__(self, field_name, exprs)
-        if self.constraints and self.order != 2:
-            raise ModelError(f"model {self.name!r}: constraints need a second-order model "
-                             f"(the multipliers of eq. constrainedso live on windows of two "
-                             f"elements); this one has order {self.order}")
+        if self.constraints and self.order > 2:
+            raise ModelError(f"model {self.name!r}: constraints are solved for models of "
+                             f"order 1 (multipliers per element, as on D_d⁽²⁾ of a "
+                             f"nonholonomic problem) and 2 (per window of two elements, eq. "
+                             f"constrainedso); this one has order {self.order}")
         if self.controls and self.lagrangian is None:
             raise ModelError("controls are evaluated at the quadrature point of a continuous "
                              "Lagrangian's discretisation; give `lagrangian`")

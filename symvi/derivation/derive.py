@@ -634,16 +634,17 @@ def _at_fixed_elements(dm: DiscreteModel, expr: sp.Expr, fibres) -> sp.Expr:
 
 
 def _check_regular(dm: DiscreteModel, step: Kernel) -> None:
-    """Refuse an L_d whose step Jacobian (D₁₂L_d, resp. D₁₃L_d) is identically singular."""
+    """Refuse an L_d whose step Jacobian (D₁₂L_d, D₁₃L_d, …: :func:`step_matrix`) is
+    identically singular."""
     jac = dict(step.outputs)["jacobian"]
     rng = np.random.default_rng(7)
     fixed = dict(zip(dm.parameters, dm.defaults)) | {dm.step: float(rng.uniform(0.05, 0.2))}
     rank, n = generic_rank(jac, step.z, fixed, definitions=step.definitions), jac.shape[0]
     if rank is not None and rank < n:
-        which = "D₁₂L_d" if dm.order == 1 else "D₁₃L_d"
+        which = dm.groupoid.step_matrix_name(dm.order)
         raise ModelError(
-            f"model {dm.name!r} is not regular: the step Jacobian ∂R/∂f ({which} for the pair "
-            f"groupoid) has rank {rank} < {n} at every sample point, so the discrete "
+            f"model {dm.name!r} is not regular: the step Jacobian ∂R/∂f ({which}) has rank "
+            f"{rank} < {n} at every sample point, so the discrete "
             f"Lagrangian does not define a step map (is the Lagrangian degenerate?)")
 
 

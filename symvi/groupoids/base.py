@@ -35,6 +35,14 @@ def derivative_name(name: str, k: int) -> str:
     return name + (("", "_dot", "_ddot", "_dddot")[k] if k < 4 else f"_d{k}")
 
 
+def _check_derivative(j, highest: int) -> None:
+    """Refuse a derivative index other than an integer 0 … ``highest`` (Lagrangians go up
+    to order :data:`symvi.discretisation.rules.MAX_ORDER`)."""
+    if isinstance(j, bool) or not isinstance(j, (int, np.integer)) or not 0 <= j <= highest:
+        raise ModelError(f"derivative({j!r}): the derivatives of a Lagrangian's symbols go "
+                         f"from 0 to {highest} (Lagrangians up to order 6)")
+
+
 def subscript(number: int) -> str:
     """``number`` in subscript digits, for messages (12 → ₁₂)."""
     return str(number).translate(str.maketrans("0123456789", "₀₁₂₃₄₅₆₇₈₉"))

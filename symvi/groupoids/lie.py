@@ -28,7 +28,7 @@ from ..errors import ModelError
 from ..discretisation.rules import LIE, LIE_MIDPOINT, MAX_ORDER, lie_central, window_derivatives
 from . import analytic
 from . import retraction as _retraction
-from .base import Algebroid, Groupoid, _shape, derivative_name
+from .base import Algebroid, Groupoid, _check_derivative, _shape, derivative_name
 
 
 def _symbol_names(names, n: int, default: str) -> tuple[str, ...]:
@@ -257,6 +257,7 @@ class MatrixLieGroup(Groupoid):
     def derivative(self, j: int) -> tuple[sp.Symbol, ...]:
         """The symbols of ξ⁽ʲ⁾: ``xi``, ``xidot``, then ``<name>_ddot``, ``<name>_dddot``,
         ``<name>_d4``, … (:func:`derivative_name`)."""
+        _check_derivative(j, MAX_ORDER - 1)
         if j < 2:
             return (self.xi, self.xidot)[j]
         return tuple(sp.Symbol(derivative_name(n, j), real=True) for n in self.names)

@@ -7,7 +7,7 @@ import sympy as sp
 
 from ..errors import ModelError
 from ..discretisation.rules import MAX_ORDER, MIDPOINT, THREE_POINT, TRAPEZOID, central
-from .base import Algebroid, Groupoid, _shape, derivative_name, step_matrix
+from .base import Algebroid, Groupoid, _check_derivative, _shape, derivative_name, step_matrix
 
 
 def _names(coordinates: str | Sequence[str]) -> tuple[str, ...]:
@@ -80,6 +80,7 @@ class PairGroupoid(Groupoid):
     def derivative(self, j: int) -> tuple[sp.Symbol, ...]:
         """The symbols of q⁽ʲ⁾: ``q``, ``qdot``, ``qddot``, then ``<name>_dddot``,
         ``<name>_d4``, … (:func:`derivative_name`)."""
+        _check_derivative(j, MAX_ORDER)
         known = (self.q, self.qdot, self.qddot)
         if j < len(known):
             return known[j]

@@ -25,9 +25,12 @@ class ProductGroupoid(Groupoid):
         if len(factors) < 2 or not all(isinstance(f, Groupoid) for f in factors):
             raise ModelError("ProductGroupoid needs two or more symvi groupoids")
         self._factors = tuple(factors)
-        # a clash of names is one of the coordinates' (higher derivatives take their names)
-        symbols = [s for f in factors for s in f.continuous_symbols(2)]
+        symbols = [s for f in factors for s in f.continuous_symbols(min(
+            g.max_order for g in factors))]
         repeated = sorted({str(s) for s in symbols if symbols.count(s) > 1})
+        # a coordinate's clash repeats in its derivatives' names: name the coordinates
+        first = {str(s) for f in factors for s in f.continuous_symbols(1)}
+        repeated = [name for name in repeated if name in first] or repeated
         if repeated:
             raise ModelError(f"the factors of a product share coordinate names {repeated}; "
                              f"rename them")

@@ -18,10 +18,13 @@ _GROUP_MODELS = ("rigid_body", "heavy_top", "spherical_pendulum", "planar_body",
 #: Lagrangians of order k > 2 (issue 25): minimum jerk (k = 3) and snap (k = 4) on the
 #: pair groupoid, their analogues in the Lie algebras of SO(3) and SE(3).
 HIGHER_ORDER = ("minimum_jerk", "minimum_snap", "so3_jerk", "se3_snap")
+#: Optimal control of nonholonomic systems on D⁽²⁾ (issue 25): first-order constrained
+#: models on D × D, solved as whole trajectories.
+NONHOLONOMIC = ("unicycle_parking", "chaplygin_sled", "rolling_coin")
 BUNDLED = ("harmonic_oscillator", "pendulum", "double_pendulum", "robot_arm", "cubic_spline",
            "spline_potential", "so3_cubic", "double_pendulum_oc", "cart_pole_oc",
            "heavy_top_rotors_oc_variational", "spacecraft_slew", "minimum_time_slew",
-           "cart_pole_swing_up", "planar_flyer", "cart_pole_catch") + HIGHER_ORDER \
+           "cart_pole_swing_up", "planar_flyer", "cart_pole_catch") + HIGHER_ORDER + NONHOLONOMIC \
     + tuple(f"{name}{suffix}" for name in _GROUP_MODELS for suffix in ("", "_exp"))
 #: Optimal-control problems (constrained second-order models solved as whole trajectories).
 CONTROL = ("rigid_body_oc", "rigid_body_oc_exp", "heavy_top_rotors_oc",

@@ -3,8 +3,9 @@
 The order-3 analogue of :mod:`so3_cubic` (the attitude's third derivative is ξ̈ in body
 coordinates), discretised by ``lie_central3``: ξ and its derivatives at the centre of a
 window of three elements from the quadratic through their increments. Increments ξ_k on
-any quadratic ξ(t) are exact discrete solutions (the gradient of the action sum in each
-increment, a fourth difference of ξ, vanishes), one-parameter subgroups among them.
+any cubic ξ(t) (degree 2k − 3) are exact discrete solutions (the gradient of the action
+sum in each increment, a fourth difference of ξ, vanishes), one-parameter subgroups among
+them.
 """
 import math
 
