@@ -232,6 +232,8 @@ class _Run:
         iterations of the last step tried)."""
         model, K = self.model, self.model.stencil_elements
         done, rnorm = model.ffi.new("long *"), model.ffi.new("double *")
+        # the Newton iteration's state, carried from chunk to chunk (templates/stepper.c.j2)
+        carry = model.ffi.new("double[]", int(model.lib.symvi_integrate_carry()))
         start, chunk = 0, 4096
         while True:
             if self.stop is not None and self.stop.is_set():
@@ -243,7 +245,7 @@ class _Run:
             code = model.lib.symvi_integrate(
                 model.ptr(z0), model.ptr(g0), size, model.ptr(self.p), self.h, maxiter, xtol,
                 ftol, model.ptr(x), model.ptr(f), model.ptr(g),
-                model.ffi.from_buffer("int[]", self.iters[at:]), done, rnorm)
+                model.ffi.from_buffer("int[]", self.iters[at:]), done, rnorm, carry)
             elapsed = time.perf_counter() - began
             finished = code != 0 or start + size == self.n_steps
             self._store(start, int(done[0]), finished)
