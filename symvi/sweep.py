@@ -100,7 +100,8 @@ def run_sweep(module, example, name: str, values: np.ndarray, *, steps: int, h: 
             raise ValueError("an optimal-control sweep varies a parameter; the step of a "
                              "whole trajectory follows from --steps and its horizon")
         batch = module.continuation(example.start, example.end, steps, h,
-                                    {name: values}, params=params, progress=progress)
+                                    {name: values}, params=params, progress=progress,
+                                    guess=example.guess_nodes(steps, module.model.order))
         return Sweep(name, values, batch, batch.cost, "cost")
     step = values if name == "h" else h
     overrides = dict(params) | ({} if name == "h" else {name: values})
