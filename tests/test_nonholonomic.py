@@ -110,7 +110,7 @@ def test_the_model_is_the_paper_discretisation_of_d2():
     (lambda Q, th: nonholonomic_control(
         "bad_act", distribution(Q, [[sp.cos(th), sp.sin(th), 0], [0, 0, 1]], "v w"),
         Q.qdot[0]**2, sp.Symbol("F")**2, ["F"], actuated=[2]),
-     r"actuated directions must be distinct indices in 0 … 1"),
+     r"actuated directions must be distinct indices in 0..1"),
 ])
 def test_bad_declarations_are_refused_with_their_reason(call, pattern):
     Q = PairGroupoid("x y theta")

@@ -19,8 +19,8 @@ action —
 and reports p, the sign and the order (next power − leading power: the relative error of
 the residual as an approximation of h^p·E). A correct symmetric rule gives +h·E + O(h³),
 order 2 (measured also for the order-k rules ``central3`` … ``central6`` and
-``lie_central3`` … ``lie_central6``: the h² term vanishes, the h³ one does not). It fails when the leading term is not ±h^p·E — naming, per component, the
-leading coefficient, the expected one and their difference — or when the order falls
+``lie_central3`` … ``lie_central6``: the h² term vanishes, the h³ one does not). It fails
+when the leading term is not ±h^p·E — naming, per component, the leading coefficient, the expected one and their difference — or when the order falls
 short of the rule's declared ``consistency_order`` (:mod:`symvi.discretisation.rules`).
 
 Skipped: models declared with a discrete Lagrangian only (there is no continuous equation;

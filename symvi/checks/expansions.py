@@ -273,7 +273,7 @@ def _stencil_atoms(jets: _AlgebroidJets, groupoid, z: Sequence[sp.Symbol], *, el
             for w in range(windows)]
     layout = _layout(groupoid)
     base = [[jets.base_derivative_poly(i, k) for k in range(degree + 1)] for i in range(m)]
-    centre = sp.nsimplify(centre)   # a half-integer: the middle of an odd window
+    centre = sp.sympify(centre)     # a half-integer: the middle of an odd window
     atoms = {s: _taylor(base[i], -centre, degree) for i, s in enumerate(x0)}
     for i, f in enumerate(fs):
         for c, s in enumerate(f):

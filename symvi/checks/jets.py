@@ -308,10 +308,7 @@ def _algebroid_operator(jets: _AlgebroidJets, lagrangian: sp.Expr, order: int) -
             term = sp.diff(lagrangian, column[j])
             for _ in range(j):
                 term = jets.derivative(term)
-            if j % 2:
-                p -= term
-            else:
-                p += term
+            p += (-1)**j * term
         P.append(sp.expand(p))
     dLdq = [sp.diff(lagrangian, s) for s in jets.q]
     rows = []
@@ -338,7 +335,7 @@ def euler_lagrange_algebroid(groupoid, lagrangian: sp.Expr, order: int,
     coordinates y_α(t) with their derivatives (a pair factor's y^{(k)} is q^{(k+1)}).
     The variational derivative of the action is −EL_r (:func:`euler_lagrange`).
     """
-    top = max(2, getattr(groupoid, "max_order", 2))
+    top = groupoid.max_order
     if not isinstance(order, int) or isinstance(order, bool) or not 1 <= order <= top:
         raise ModelError(f"order must be an integer from 1 to {top} on {groupoid!r}, "
                          f"got {order!r}")

@@ -79,15 +79,8 @@ SAMPLES = 3
 
 
 def structure_name(groupoid: Groupoid, order: int) -> str:
-    """The structure the step map of ``order`` on ``groupoid`` preserves, for messages
-    (the groupoid's words for orders 1 and 2; of order r ≥ 3, the coordinates of
-    :meth:`StepMap.legendre`)."""
-    if order <= 2:
-        return groupoid.preserved_structure(order)
-    f, p = (", ".join(f"{c}{subscript(j)}" for j in range(order - 1)) for c in "fp")
-    return (f"Poisson structure of A*G × T*(H^{order - 1}) (the reduced T*(H^{order}); on a "
-            f"pair groupoid the canonical form of T*(Q^{order})), (x₀, ν; {f}; {p}) one "
-            f"element on")
+    """The structure the step map of ``order`` on ``groupoid`` preserves, for messages."""
+    return groupoid.preserved_structure(order)
 
 
 def state_text(order: int) -> str:

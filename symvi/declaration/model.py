@@ -223,14 +223,13 @@ class Model:
                       if set(g.leading_symbols(k)) & L.free_symbols
                       and (k <= g.max_order or not set(g.leading_symbols(k)) <= own)),
                      default=1)
+        top = [str(s) for s in g.leading_symbols(needed) if s in L.free_symbols]
         if needed > g.max_order:
-            top = [str(s) for s in g.leading_symbols(needed) if s in L.free_symbols]
             raise ModelError(f"the Lagrangian of model {self.name!r} depends on {top} (order "
                              f"{needed}); {g!r} takes orders up to {g.max_order}")
         name = self.discretisation or g.default_discretisation(needed)
         rule = g.rule(name)
         if rule.order < needed:
-            top = [str(s) for s in g.leading_symbols(needed) if s in L.free_symbols]
             raise ModelError(f"the Lagrangian depends on {top} ({_order(needed)}) but the "
                              f"discretisation {name!r} is {_order(rule.order)}; use "
                              f"{g.default_discretisation(needed)!r}")

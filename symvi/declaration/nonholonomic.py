@@ -28,6 +28,7 @@ import sympy as sp
 
 from ..errors import ModelError
 from ..groupoids.pair import PairGroupoid
+from .control import _actuated, _control_symbols
 from .model import Example, Model, _sympify_parameters
 from .rank import generic_rank
 from .validation import scalar
@@ -136,8 +137,8 @@ def nonholonomic_control(name: str, D: Distribution, lagrangian: Any, cost: Any,
     ``cost``: C in ``D.q``, ``D.y`` and the control symbols; ``controls``: one symbol per
     actuated direction, u_a = E_a; ``actuated``: the indices a of the actuated fields
     (default: all), the others giving the constraints E_A = 0. The model's constraints
-    are the kinematic q̇ − ρ(q) y = 0 (named ``kinematic <coordinate>``), then E_A; its
-    controls are u_a at each element's midpoint. ``solve_bvp`` takes the first and last
+    are the kinematic q̇ − ρ(q) y = 0, one per coordinate, then E_A; its controls are u_a
+    at each element's midpoint. ``solve_bvp`` takes the first and last
     nodes (q, y) as arrays of shape (1, m + n).
     """
     params = _sympify_parameters(dict(parameters or {}))
@@ -150,11 +151,8 @@ def nonholonomic_control(name: str, D: Distribution, lagrangian: Any, cost: Any,
                          f"q, q̇ ({', '.join(map(str, D.base.continuous_symbols(1)))}) and "
                          f"the parameters")
     n = len(D.y)
-    actuated = tuple(range(n)) if actuated is None else tuple(int(a) for a in actuated)
-    if len(set(actuated)) != len(actuated) or not all(0 <= a < n for a in actuated):
-        raise ModelError(f"actuated directions must be distinct indices in 0 … {n - 1}, "
-                         f"got {list(actuated)}")
-    u = _controls(controls, len(actuated))
+    actuated = _actuated(actuated, n)
+    u = _control_symbols(controls, len(actuated))
     E = lagrange_dalembert(D, L)
     C = scalar(cost, "cost")
     # a control is known by its name, whatever assumptions the cost's symbol carries
@@ -175,13 +173,3 @@ def nonholonomic_control(name: str, D: Distribution, lagrangian: Any, cost: Any,
                  controls=[E[a] for a in actuated], example=example,
                  description=description)
 
-
-def _controls(controls, count: int) -> tuple[sp.Symbol, ...]:
-    if isinstance(controls, str):
-        controls = controls.replace(",", " ").split()
-    symbols = tuple(c if isinstance(c, sp.Symbol) else sp.Symbol(str(c), real=True)
-                    for c in controls)
-    if len(symbols) != count:
-        raise ModelError(f"{count} actuated directions need {count} control symbols, got "
-                         f"{len(symbols)}")
-    return symbols

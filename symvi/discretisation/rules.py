@@ -148,6 +148,8 @@ LIE = Rule("lie", 1, "Lie group: L_d(w) = h l(xi), xi = tau^-1(w)/h; action grou
 LIE_MIDPOINT = Rule("lie_midpoint", 2, "Lie group: L_d(w0, w1) = h L((xi0+xi1)/2, "
                                        "(xi1-xi0)/h) (paper eq. sdfinal); action groupoid: "
                                        "the base point at the middle node", _lie_midpoint)
+
+
 @functools.lru_cache(maxsize=None)
 def central(order: int) -> Rule:
     """The pair groupoid's rule of ``order`` ≥ 3 (:func:`_central`)."""

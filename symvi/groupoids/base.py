@@ -294,7 +294,14 @@ class Groupoid(ABC):
         return f"{step_matrix(order)} analogue"
 
     def preserved_structure(self, order: int) -> str:
-        """The structure the step map of ``order`` preserves (paper §4.3), for messages."""
+        """The structure the step map of ``order`` preserves (paper §4.3), for messages; of
+        order r ≥ 3 the reduced T*(H^r) in the chart of the first r nodes
+        (:meth:`symvi.checks.stepmap.StepMap.legendre`), for every groupoid."""
         if order == 1:
             return "linear Poisson structure of A*G, (x_k, μ_k) ↦ (x_{k+1}, μ_{k+1})"
-        return "Poisson structure of A*(P^αG) = A*G × T*H, (x, ν, w_k, p) one element on"
+        if order == 2:
+            return "Poisson structure of A*(P^αG) = A*G × T*H, (x, ν, w_k, p) one element on"
+        f, p = (", ".join(f"{c}{subscript(j)}" for j in range(order - 1)) for c in "fp")
+        return (f"Poisson structure of A*G × T*(H^{order - 1}) (the reduced T*(H^{order}); on "
+                f"a pair groupoid the canonical form of T*(Q^{order})), (x₀, ν; {f}; {p}) one "
+                f"element on")

@@ -315,10 +315,12 @@ class MatrixLieGroup(Groupoid):
         return (None,) * self.fibre_dim          # ξ at the element's middle
 
     def equation_setting(self, order):
-        return "Euler–Poincaré" if order == 1 else f"order-{order} Euler–Poincaré" if order > 2 \
-            else "second-order Euler–Poincaré"
+        return {1: "Euler–Poincaré", 2: "second-order Euler–Poincaré"}.get(
+            order, f"order-{order} Euler–Poincaré")
 
     def preserved_structure(self, order):
+        if order > 2:
+            return super().preserved_structure(order)
         if order == 1:
             return "Lie–Poisson structure of 𝔤*, μ_k ↦ μ_{k+1}"
         return "Poisson structure of A*(P^αG) = 𝔤* × T*G, (ν, w_k, p) one element on"

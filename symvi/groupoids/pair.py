@@ -34,9 +34,8 @@ class PairGroupoid(Groupoid):
     Symbols for declaring Lagrangians: ``q`` (coordinates), ``qdot`` (velocities),
     ``qddot`` (accelerations), ``derivative(j)`` (q⁽ʲ⁾ for any j ≤ 6: ``x_dddot``,
     ``x_d4``, …, for a Lagrangian of order j; ``derivative(1)`` is ``qdot``) and, for a
-    discrete Lagrangian
-    given directly, ``nodes(k)`` — the coordinates of the k+1 nodes q_0, …, q_k of one
-    window (order k).
+    discrete Lagrangian given directly, ``nodes(k)`` — the coordinates of the k+1 nodes
+    q_0, …, q_k of one window (order k).
 
     Parameters
     ----------
@@ -172,6 +171,8 @@ class PairGroupoid(Groupoid):
         return step_matrix(order)
 
     def preserved_structure(self, order):
+        if order > 2:
+            return super().preserved_structure(order)
         if order == 1:
             return "canonical symplectic form of T*Q, (q_k, p_k) ↦ (q_{k+1}, p_{k+1})"
         return "canonical symplectic form of T*(Q×Q), (q_k, q_{k+1}, p_k, p_{k+1}) one node on"

@@ -25,8 +25,7 @@ class ProductGroupoid(Groupoid):
         if len(factors) < 2 or not all(isinstance(f, Groupoid) for f in factors):
             raise ModelError("ProductGroupoid needs two or more symvi groupoids")
         self._factors = tuple(factors)
-        symbols = [s for f in factors for s in f.continuous_symbols(min(
-            g.max_order for g in factors))]
+        symbols = [s for f in factors for s in f.continuous_symbols(self.max_order)]
         repeated = sorted({str(s) for s in symbols if symbols.count(s) > 1})
         # a coordinate's clash repeats in its derivatives' names: name the coordinates
         first = {str(s) for f in factors for s in f.continuous_symbols(1)}
