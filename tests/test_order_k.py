@@ -71,6 +71,41 @@ def test_polynomial_increments_are_exact_on_the_group(name, compiled):
     assert np.ptp(run.f, axis=0).max() > 0.1       # the increments do vary
 
 
+def _initial_data(model, k: int, seed: int):
+    """The first 2k nodes (pair groupoid) or g₀ and the first 2k − 1 increments."""
+    rng, dim = np.random.default_rng(seed), model.groupoid.fibre_dim
+    if isinstance(model.groupoid, PairGroupoid):
+        return 0.1 * rng.standard_normal((2 * k, dim))
+    return np.eye(model.groupoid.matrix_dim), 0.1 * rng.standard_normal((2 * k - 1, dim))
+
+
+@pytest.mark.parametrize("name", ["cubic_spline", "minimum_jerk", "minimum_snap", "so3_jerk",
+                                  "se3_snap"])
+def test_short_runs_keep_the_states_their_path_determines(name, compiled):
+    """Issue 48: every n_steps ≥ 2k − 1 integrates. State j < k takes its momenta from
+    F⁻L_d on the 2k − 1 elements after it, so a path of fewer than 3k − 2 elements
+    determines only its first n − 2k + 2 states: those are returned (equal to a longer
+    run's), never states read past the path's end — a run failing at its first step too,
+    and the batch loop trajectory by trajectory."""
+    model, mod = get(name), compiled(name)
+    k = model.order
+    for n in range(2 * k - 1, 3 * k):
+        data = [_initial_data(model, k, seed) for seed in (n, n + 100)]
+        runs = [mod.integrate(d, n, 0.1) for d in data]
+        longer = mod.integrate(data[0], 3 * k + 2, 0.1)
+        assert all(run.success for run in runs + [longer]), runs[0].message
+        states = n - k + 2 if n >= 3 * k - 2 else n - 2 * k + 2
+        assert runs[0].momenta.shape[0] == states, (n, runs[0].momenta.shape)
+        np.testing.assert_allclose(runs[0].momenta, longer.momenta[:states], rtol=1e-12,
+                                   atol=1e-12)
+        if isinstance(model.groupoid, PairGroupoid):
+            batch = mod.integrate_many(np.stack(data), n, 0.1)
+            for b, run in enumerate(runs):
+                assert np.array_equal(batch[b].momenta, run.momenta), (n, b)
+    failed = mod.integrate(_initial_data(model, k, 0), 20, 0.1, maxiter=1, xtol=0.0)
+    assert not failed.success and failed.momenta.shape[0] == 1, failed.message
+
+
 def test_band_grows_with_the_order_not_with_n(compiled):
     """The whole-trajectory Newton matrix of an order-k model couples nodes within k of
     each other: n(k + 1) − 1 diagonals on either side, whatever N."""

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 
 from .results import BatchResult, Status
-from .stepping import finite, layout, outcome
+from .stepping import entries, finite, layout, outcome
 from .storage import first_kept, kept_count
 
 #: Stored bytes of one trajectory's full path above which a batch is run trajectory by
@@ -30,7 +30,7 @@ class Stacked:
         self.fields = layout(model, quantities)[1]
         self.arrays, self.lengths = {}, {}
         for name, (lag, offset, shape) in self.fields.items():
-            kept = kept_count(n_steps + lag, offset, keep)
+            kept = kept_count(entries(model, name, lag, n_steps), offset, keep)
             integer = name == "newton_iterations"
             self.arrays[name] = np.full((B, kept, *shape), -1 if integer else np.nan,
                                         dtype=np.intc if integer else float)
@@ -93,7 +93,8 @@ def _store_completed(model, stacked: Stacked, indices: np.ndarray, scratch: dict
     (one thinning per field); return which they were (the others: :func:`_store`)."""
     keep, thinned = stacked.keep, {}
     for name, (lag, offset, _) in stacked.fields.items():
-        thinned[name] = scratch[name][:, first_kept(offset, keep): max(E + lag, 0): keep]
+        count = entries(model, name, lag, E)
+        thinned[name] = scratch[name][:, first_kept(offset, keep): max(count, 0): keep]
         if name != "newton_iterations":
             finite = np.isfinite(thinned[name].reshape(len(ok), -1)).all(axis=1)
             ok = ok & finite
@@ -137,7 +138,8 @@ def _store(model, stacked: Stacked, b: int, j: int, scratch: dict, elements: int
     """Trajectory j of the slice, thinned to every keep-th node, as trajectory b."""
     keep, out = stacked.keep, {}
     for name, (lag, offset, _) in stacked.fields.items():
-        values = scratch[name][j, first_kept(offset, keep): max(elements + lag, 0): keep]
+        count = entries(model, name, lag, elements)
+        values = scratch[name][j, first_kept(offset, keep): max(count, 0): keep]
         out[name] = values
         stacked.arrays[name][b, :len(values)] = values
         stacked.lengths[name][b] = len(values)

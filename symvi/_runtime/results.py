@@ -175,7 +175,9 @@ class StepResult(_Result):
         group, else None.
     momenta : discrete Legendre transforms at each state: (E+1, n) for first order
         (p_0 from F⁻L_d, p_k for k ≥ 1 from F⁺L_d), (E, 2, n) for second order (state k
-        is the node pair (ν_k, ν_{k+1}); states 0, 1 from F⁻L_d, the rest from F⁺L_d).
+        is the node pair (ν_k, ν_{k+1}); states 0, 1 from F⁻L_d, the rest from F⁺L_d);
+        (E − r + 2, r, n) at order r — but a path of fewer than 3r − 2 elements
+        determines only its first E − 2r + 2 states, and holds those (a longer run's).
     energy : (E,) discrete energy −∂L_d/∂h per element (first-order models), else None.
     noether : (E−2r+2, s) conserved quantities F_Z of the model's declared symmetries at
         nodes r−1, r, … (paper §4.4), one column per symmetry, else None. Momenta,

@@ -202,6 +202,21 @@ def layout(model, quantities: bool = True) -> tuple[list[_Quantity],
     return derived, fields
 
 
+def entries(model, name: str, lag: int, elements: int) -> int:
+    """How many entries of the field ``name`` (of lag ``lag``) a path of ``elements``
+    elements determines: elements + lag, except the momenta of a short path.
+
+    State j < r comes from F⁻L_d on the 2r − 1 elements after it, state j ≥ r from F⁺L_d
+    on the 2r − 1 before it; a path of fewer than 3r − 2 elements has no elements after
+    its states E − 2r + 2 … r − 1 and none before them, so they are not determined, and
+    its momenta are its first E − 2r + 2 states (F⁻L_d's) only.
+    """
+    if name != "momenta":
+        return elements + lag
+    r, w = model.order, model.order - lag + 1     # lag = r − w + 1, w the window
+    return elements + lag if elements >= r + w - 1 else max(elements - w + 1, 0)
+
+
 class _Run:
     """The stored series of one run and the chunk loop that fills them."""
 
@@ -278,8 +293,8 @@ class _Run:
                 if name in self.series:
                     self.series[name].put(start, values[: valid if finished else done])
         for q in self.quantities:
-            if q.first:
-                windows = q.first if start == 0 else 0
+            if q.first:     # fewer than `first` on a short path (see entries)
+                windows = min(q.first, elements - q.width + 1) if start == 0 else 0
             else:
                 windows = elements - q.width + 1 if finished else done
             if windows > 0:
@@ -292,7 +307,7 @@ class _Run:
         """The StepResult of a run that completed ``steps`` steps."""
         elements = self.model.stencil_elements - 1 + steps
         out = {"g": None, "energy": None, "noether": None}
-        out |= {name: self.series[name].until(elements + lag)
+        out |= {name: self.series[name].until(entries(self.model, name, lag, elements))
                 for name, (lag, _, _) in self.fields.items()}
         if status == Status.SUCCESS:
             status, message = finite(out, message, self.h * self.keep)
