@@ -21,6 +21,12 @@ class CompilerNotFoundError(BuildError):
     """No working C compiler is available to cffi."""
 
 
+class OutputConflictError(BuildError, ValueError):
+    """The output folder holds something named like the model's package that symvi did
+    not make: the build refuses it (never moves or deletes it). A ``ValueError`` too: bad
+    input, fixed by another output folder or a rename."""
+
+
 class DamagedPackageError(SymviError, ImportError):
     """A generated package's files do not match its manifest: recompile it."""
 

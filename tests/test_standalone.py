@@ -27,7 +27,7 @@ import sympy as sp
 
 import symvi
 from symvi import Model, PairGroupoid
-from symvi.build import MANIFEST, compile_model
+from symvi.build import MANIFEST, cache_key, compile_model
 from symvi.errors import CacheWarning
 from symvi.models import BUNDLED, get
 
@@ -278,11 +278,14 @@ def test_interrupted_build_debris_does_not_break_compile_or_import(tmp_path):
         (junk / "__init__.py").write_text("raise RuntimeError('half-written package imported')\n")
         (junk / "_ext_0000000000000000.c").write_text("this is not C")
     (tmp_path / f".{name}" / "link-deadbeef").symlink_to("nowhere")
-    # ... and a package folder without its manifest or extension (older symvi, killed
-    # mid-copy)
+    # ... and the package folder of a symvi before the link layout (its manifest, which
+    # listed no files, but not its extension): symvi's, so it is replaced; a folder
+    # without a manifest would be the user's, and refused (test_build_hardening)
     partial = tmp_path / name
     (partial / "_runtime").mkdir(parents=True)
     (partial / "__init__.py").write_text("raise RuntimeError('partial package imported')\n")
+    (partial / MANIFEST).write_text(json.dumps({"key": cache_key(get(name)),
+                                                "extension": "_ext_0000000000000000.so"}))
 
     with pytest.warns(CacheWarning, match="pendulum: cached build is damaged"):
         mod = compile_model(get(name), tmp_path)

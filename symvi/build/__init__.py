@@ -177,7 +177,8 @@ def _import(folder: Path, manifest: dict) -> ModuleType:
 # -- compiling -----------------------------------------------------------------------------
 def compile_model(model: Model, out_dir: str | os.PathLike = "generated", *,
                   force: bool = False, verbose: bool = False, timeout: float | None = None,
-                  progress: Progress | None = None) -> ModuleType:
+                  progress: Progress | None = None,
+                  clock: StageClock | None = None) -> ModuleType:
     """Derive, emit and build ``model`` into ``out_dir/<name>`` and import it.
 
     An unchanged model reuses its build unless ``force``, after checking every file of
@@ -185,23 +186,36 @@ def compile_model(model: Model, out_dir: str | os.PathLike = "generated", *,
     what was wrong. A current build is loaded without writing anything (it may sit in
     a read-only folder).
 
-    ``timeout`` (seconds) bounds the whole build; at the deadline it stops with a
-    :class:`~symvi.errors.BuildError` naming the stage that was running (discretise,
-    derive, emit, C compile) and the time of each finished stage. The symbolic stages
-    can only be interrupted when called from the main thread (``SIGALRM``); from other
-    threads the deadline bounds the C compile and is checked between stages.
+    ``timeout`` (seconds) bounds the whole build, counted from this call; at the
+    deadline it stops with a :class:`~symvi.errors.BuildError` naming the stage that was
+    running (discretise, derive, emit, C compile), the time since the start and the time
+    of each finished stage. ``clock`` instead goes on with a clock already running, with
+    its own timeout and progress (the command line's, started before it loaded the model
+    file as its first stage, so that ``--timeout`` counts from the command's start). The
+    symbolic stages can only be interrupted when called from the main thread
+    (``SIGALRM``); from other threads the deadline bounds the C compile and is checked
+    between stages.
     ``progress`` receives a line for each stage that runs longer than 2 s (``verbose``:
     for every stage); ``verbose`` also shows the compiler's output on stderr.
 
+    The build touches only what symvi made: anything else at ``out_dir/<name>`` or
+    ``out_dir/.<name>`` (a folder of the user's, a file, a link elsewhere) is refused,
+    before any work, with an :class:`~symvi.errors.OutputConflictError` naming it; it is
+    never moved or deleted.
+
     Raises :class:`~symvi.errors.ModelError` for an invalid (e.g. non-regular) model,
     :class:`~symvi.errors.BuildError` if C compilation fails (with the compiler's
-    output), the output folder cannot be written or the timeout passes, and
+    output), the output folder cannot be written or the timeout passes,
+    :class:`~symvi.errors.OutputConflictError` (a ``BuildError`` and a ``ValueError``) for
+    a name taken by something not symvi's, and
     :class:`~symvi.errors.CompilerNotFoundError` if there is no C compiler.
     """
-    clock = StageClock(model.name, timeout, progress, verbose)
+    clock = _clock(model, timeout, progress, verbose, clock)
     out = Path(out_dir)
     ensure_folder(out)
-    key, layout = cache_key(model), Layout(out, model.name)
+    layout = Layout(out, model.name)
+    layout.refuse_foreign()
+    key = cache_key(model)
     if not force:
         verdict = inspect(layout.target, key)
         if verdict.current:
@@ -218,6 +232,19 @@ def compile_model(model: Model, out_dir: str | os.PathLike = "generated", *,
                               CacheWarning, stacklevel=2)
         folder = _build(model, key, layout, clock, verbose)
         return _import(folder, read_manifest(folder))
+
+
+def _clock(model: Model, timeout: float | None, progress: Progress | None, verbose: bool,
+           running: StageClock | None) -> StageClock:
+    """The build's stage clock: ``running`` (renamed for the model) or a new one."""
+    if running is None:
+        return StageClock(model.name, timeout, progress, verbose)
+    if timeout is not None or progress is not None:
+        raise ValueError("compile_model: give a timeout and progress either directly or "
+                         "through the clock, not both")
+    # until now the clock named what it was loading (a model file, a bundled name)
+    running.name = model.name
+    return running
 
 
 def _tidy(layout: Layout) -> None:

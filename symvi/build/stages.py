@@ -1,5 +1,8 @@
 """Stage timing of a build: progress lines, and a deadline (``compile_model(timeout=)``).
 
+The deadline counts from the clock's creation: ``compile_model``'s start, or the
+command's start for ``symvi compile``, whose first stage loads the model file.
+
 The symbolic stages (discretise, derive, emit) run in this process and are interrupted
 at the deadline by :func:`symvi.timing.interrupted_after` (``SIGALRM``, which Python only
 allows in the main thread): called from another thread, a stage that overruns the
@@ -48,7 +51,7 @@ class StageClock:
         and ``interruptible`` only), and raise :class:`BuildError` if it overran."""
         began = time.monotonic()
         if self.deadline is not None and began >= self.deadline:
-            raise self.expired(label, began)
+            raise self.expired(label, None)
         say = None if self.progress is None else self._say
         remaining = self.remaining() if interruptible else None
         try:
@@ -61,12 +64,18 @@ class StageClock:
             raise self.expired(label, began)
         self.finished.append((label, ended - began))
 
-    def expired(self, label: str, began: float) -> BuildError:
-        """The error for a build that gave up at the deadline during stage ``label``."""
+    def expired(self, label: str, began: float | None) -> BuildError:
+        """The error for a build that gave up at the deadline during stage ``label``
+        (which began at ``began``; None: before it could begin). It says how long since
+        the start, so that time spent outside the stages (waiting for another build's
+        lock) is not hidden."""
+        now = time.monotonic()
         done = ", ".join(f"{stage} {seconds:.2f} s" for stage, seconds in self.finished)
+        where = f"before stage '{label}' could begin" if began is None else \
+            f"in stage '{label}' (running for {now - began:.1f} s)"
         return BuildError(
-            f"{self.name}: gave up at the timeout of {self.timeout:g} s in stage '{label}' "
-            f"(running for {time.monotonic() - began:.1f} s); finished stages: "
+            f"{self.name}: gave up at the timeout of {self.timeout:g} s, "
+            f"{now - self.start:.1f} s after the start, {where}; finished stages: "
             f"{done or 'none'}")
 
     # -- progress -------------------------------------------------------------------------

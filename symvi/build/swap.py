@@ -16,6 +16,16 @@ may still be reading; that one goes at the next publish. A build killed at any p
 leaves a ``build-*`` folder, a temporary ``link-*`` or an unlinked version, all of
 which the next build removes.
 
+A build touches only what symvi made (:meth:`Layout.refuse_foreign`, before any work):
+``DIR/NAME`` is symvi's if it is a link ``.NAME/<version>`` or a folder holding a
+manifest (the package of a symvi before the link layout, moved into ``.NAME/`` as
+``legacy-*`` at the next publish); ``.NAME/`` if it is a real folder that is empty or
+holds the lock or an entry symvi names and types as its own (a version, scratch or
+legacy folder, a temporary link: ``_OWN``). Anything else named so is refused with an
+:class:`~symvi.errors.OutputConflictError`, never moved or deleted. Clean-up removes
+only such entries of ``.NAME/``, and beside ``DIR/NAME`` only an older symvi's debris;
+it never lists or deletes through a symbolic link.
+
 The lock (:class:`FileLock`) is ``flock`` on POSIX and a lock on the lock file's first
 byte (``msvcrt.locking``) on Windows; either excludes other processes and other threads
 of this process.
@@ -25,14 +35,17 @@ from __future__ import annotations
 import contextlib
 import errno
 import os
+import re
 import shutil
+import stat
 import tempfile
 import time
 import uuid
 from pathlib import Path
 from typing import Iterator
 
-from ..errors import BuildError
+from ..errors import BuildError, OutputConflictError
+from .cache import MANIFEST, read_manifest
 from .files import READ_ONLY, describe_os_error, writing
 
 try:
@@ -45,6 +58,13 @@ LOCK = "lock"
 SCRATCH = "build-"
 _TEMP_LINK = "link-"
 _LEGACY = "legacy-"
+#: The names symvi gives the entries of ``.NAME/`` it makes, by what they are: version
+#: folders (:meth:`Layout.new_version`: 16 hex digits of the key, a nonce), scratch
+#: folders (``tempfile.mkdtemp``'s eight characters), moved-aside packages of an older
+#: layout, and temporary links (eight hex digits). Nothing else there is symvi's.
+_OWN = {"folder": re.compile(rf"[0-9a-f]{{16}}-[0-9a-f]{{8}}|{SCRATCH}[a-z0-9_]{{8}}"
+                             rf"|{_LEGACY}[0-9a-f]{{8}}"),
+        "link": re.compile(rf"{_TEMP_LINK}[0-9a-f]{{8}}")}
 #: errno of ``msvcrt.locking`` when another handle holds the byte: EACCES for the
 #: non-blocking try used here (EDEADLOCK is the CRT's "gave up" of its waiting modes).
 _BUSY = {errno.EACCES, getattr(errno, "EDEADLOCK", errno.EDEADLK)}
@@ -65,7 +85,8 @@ class FileLock:
 
     def __init__(self, path: Path):
         self.path = path
-        self._fd = os.open(path, os.O_RDWR | os.O_CREAT, 0o666)
+        # never through a link: a link named ``lock`` would create or lock its target
+        self._fd = os.open(path, os.O_RDWR | os.O_CREAT | getattr(os, "O_NOFOLLOW", 0), 0o666)
 
     def acquire(self, wait: bool = True) -> bool:
         """Take the lock, waiting for it unless ``wait`` is off; whether it is held."""
@@ -125,6 +146,50 @@ def not_writable(folder: Path) -> BuildError:
                       f"(re)built; choose another folder (-o) or make it writable")
 
 
+def conflict(path: Path, name: str, what: str) -> OutputConflictError:
+    """The refusal of ``path``, in the way of the package ``name`` and not symvi's."""
+    return OutputConflictError(
+        f"{path} is in the way of the package {name!r}: it was not made by symvi ({what}), "
+        f"and symvi neither moves nor deletes it; compile into another folder (-o) or "
+        f"rename it")
+
+
+def _entry_type(path: Path) -> str | None:
+    """What ``path`` itself is, links not followed: "link", "folder", "file" or None
+    (nothing there)."""
+    try:
+        mode = path.lstat().st_mode
+    except (FileNotFoundError, NotADirectoryError):
+        return None
+    if stat.S_ISLNK(mode):
+        return "link"
+    return "folder" if stat.S_ISDIR(mode) else "file"
+
+
+def _is_package(folder: Path) -> bool:
+    """Whether the real folder ``folder`` holds a symvi manifest (every symvi wrote one
+    into each package before publishing it)."""
+    manifest = read_manifest(folder)
+    return manifest is not None and "key" in manifest
+
+
+def _is_own_entry(entry: Path) -> bool:
+    """Whether an entry of ``.NAME/`` is one a build makes and clean-up may remove, by
+    its name and what it is (:data:`_OWN`; never the lock)."""
+    pattern = _OWN.get(_entry_type(entry))
+    return pattern is not None and pattern.fullmatch(entry.name) is not None
+
+
+def _remove(path: Path) -> None:
+    """Remove ``path``: a real folder with its content, anything else (a link included)
+    by unlinking it; a link is never followed."""
+    if _entry_type(path) == "folder":
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        with contextlib.suppress(OSError):
+            path.unlink()
+
+
 class Layout:
     """The paths of one model's package in one output folder (see the module doc)."""
 
@@ -132,6 +197,50 @@ class Layout:
         self.out, self.name = out, name
         self.target = out / name
         self.store = out / f".{name}"
+        # what a symvi before the link layout left beside DIR/NAME when killed: its
+        # scratch folders (``tempfile.mkdtemp``'s eight characters) and swapped-out
+        # packages (eight hex digits)
+        self._old_debris = re.compile(
+            rf"\.{re.escape(name)}(?:-build-[a-z0-9_]{{8}}|\.old-[0-9a-f]{{8}})")
+
+    # -- what is symvi's ------------------------------------------------------------------
+    def refuse_foreign(self) -> None:
+        """Raise :class:`~symvi.errors.OutputConflictError` if ``DIR/NAME`` or ``.NAME``
+        is there and not symvi's (see the module doc). Reads only: call it before any
+        work, also for a build that may be a cache hit in a read-only folder."""
+        for path, what in ((self.target, self._foreign_target()),
+                           (self.store, self._foreign_store())):
+            if what is not None:
+                raise conflict(path, self.name, what)
+
+    def _foreign_target(self) -> str | None:
+        """What ``DIR/NAME`` is if it is not symvi's (None: absent or symvi's)."""
+        entry = _entry_type(self.target)
+        if entry == "link":
+            text = os.readlink(self.target)
+            return None if self._is_own_link(text) else f"a symbolic link to {text}"
+        if entry == "folder" and not _is_package(self.target):
+            return f"a folder without symvi's manifest {MANIFEST}"
+        return "a file" if entry == "file" else None
+
+    def _is_own_link(self, text: str) -> bool:
+        """Whether a link's ``text`` is the one :meth:`publish` writes: ``.NAME/<version>``."""
+        store, _, version = text.replace(os.sep, "/").partition("/")
+        return store == self.store.name and version not in ("", ".", "..") \
+            and "/" not in version
+
+    def _foreign_store(self) -> str | None:
+        """What ``.NAME`` is if it is not symvi's (None: absent or symvi's)."""
+        entry = _entry_type(self.store)
+        if entry == "link":
+            return f"a symbolic link to {os.readlink(self.store)}"
+        if entry == "file":
+            return "a file"
+        entries = self._entries()
+        if entry is None or not entries or any(
+                _is_own_entry(e) or (e.name == LOCK and _entry_type(e) == "file") for e in entries):
+            return None
+        return "a folder without symvi's build lock or builds"
 
     # -- locking --------------------------------------------------------------------------
     @contextlib.contextmanager
@@ -171,7 +280,8 @@ class Layout:
     def publish(self, package: Path, version: str) -> str | None:
         """Move the finished ``package`` folder to ``.NAME/<version>`` and point
         ``DIR/NAME`` at it atomically. Returns the replaced version's folder name (in
-        ``.NAME/``), if there was one."""
+        ``.NAME/``), if there was one. Raises :class:`~symvi.errors.OutputConflictError`,
+        replacing nothing, if ``DIR/NAME`` is no longer symvi's."""
         final = self.store / version
         with writing(final, "move the finished package to"):
             os.rename(package, final)
@@ -194,55 +304,68 @@ class Layout:
 
     def _move_aside_real_folder(self) -> str | None:
         """Migration from a symvi that wrote ``DIR/NAME`` as a folder: move it into
-        ``.NAME/`` (this once, the swap is two steps). Refuses to replace a file."""
-        if self.target.is_symlink() or not self.target.exists():
+        ``.NAME/`` (this once, the swap is two steps). Checked again here, just before
+        the swap, since the build began: what is not symvi's is refused, not moved."""
+        what = self._foreign_target()
+        if what is not None:
+            raise conflict(self.target, self.name, what)
+        if _entry_type(self.target) != "folder":
             return None
-        if not self.target.is_dir():
-            raise BuildError(f"{self.target} exists and is not a generated package (it is a "
-                             f"file); remove it or compile into another folder (-o)")
         aside = f"{_LEGACY}{uuid.uuid4().hex[:8]}"
         os.rename(self.target, self.store / aside)
         return aside
 
     # -- cleaning -------------------------------------------------------------------------
     def clean(self, keep: set[str]) -> None:
-        """Remove every entry of ``.NAME/`` but the lock and ``keep``, and the debris
-        of older symvi versions beside ``DIR/NAME`` (call under the lock)."""
-        self._remove_all(e for e in self._entries() if e.name not in keep | {LOCK})
-        self._remove_legacy_debris()
+        """Remove every entry of ``.NAME/`` that a build makes but ``keep``, and the
+        debris of older symvi versions beside ``DIR/NAME`` (call under the lock)."""
+        self._remove_all(e for e in self._entries()
+                         if e.name not in keep and _is_own_entry(e))
+        self._remove_all(self._older_debris())
 
     def clean_scratch(self) -> None:
         """Remove what killed builds left (scratch folders, temporary links) but no
         version: a cache hit does not know which version is the retained previous one."""
-        self._remove_all(e for e in self._entries()
-                         if e.name.startswith((SCRATCH, _TEMP_LINK)))
-        self._remove_legacy_debris()
+        self._remove_all(self._scratch())
+        self._remove_all(self._older_debris())
 
     def has_debris(self) -> bool:
         """Whether a killed build left something for :meth:`clean_scratch`."""
-        legacy = any(self.out.glob(f".{self.name}-build-*")) \
-            or any(self.out.glob(f".{self.name}.old-*"))
-        return legacy or any(e.name.startswith((SCRATCH, _TEMP_LINK)) for e in self._entries())
+        return bool(self._scratch() or self._older_debris())
+
+    def _scratch(self) -> list[Path]:
+        return [e for e in self._entries()
+                if e.name.startswith((SCRATCH, _TEMP_LINK)) and _is_own_entry(e)]
 
     def _entries(self) -> list[Path]:
+        """The entries of ``.NAME/`` (none if it is a link: never listed through one)."""
+        if _entry_type(self.store) != "folder":
+            return []
         try:
             return list(self.store.iterdir())
         except OSError:
             return []
 
-    def _remove_legacy_debris(self) -> None:
-        self._remove_all([*self.out.glob(f".{self.name}-build-*"),
-                          *self.out.glob(f".{self.name}.old-*"),
-                          *self.out.glob(f".{self.name}.lock")])
+    def _older_debris(self) -> list[Path]:
+        """What a symvi before the link layout left beside ``DIR/NAME``: scratch folders
+        and swapped-out packages (real folders, by their exact names) and its lock file
+        (an empty file)."""
+        try:
+            beside = list(self.out.iterdir())
+        except OSError:
+            return []
+        found = [p for p in beside
+                 if self._old_debris.fullmatch(p.name) and _entry_type(p) == "folder"]
+        lock = self.out / f"{self.store.name}.lock"
+        with contextlib.suppress(OSError):
+            if _entry_type(lock) == "file" and lock.lstat().st_size == 0:
+                found.append(lock)
+        return found
 
     @staticmethod
     def _remove_all(paths) -> None:
         for path in paths:
-            if path.is_dir() and not path.is_symlink():
-                shutil.rmtree(path, ignore_errors=True)
-            else:
-                with contextlib.suppress(OSError):
-                    path.unlink()
+            _remove(path)
 
 
 def ensure_folder(out: Path) -> None:
