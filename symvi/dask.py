@@ -13,6 +13,10 @@ The package must be readable by the workers under the same path: a shared file s
 extension modules from a zip archive. The workers need symvi installed (the task code is
 here) and the same Python, NumPy and C ABI as the machine that compiled the package.
 
+Every argument is checked here, on the client, before any task is submitted, by the
+local calls' own checks (``_runtime/batch_arguments.py``): a bad batch is refused in the
+same words as on threads, and no cluster time is spent on it.
+
     from dask.distributed import Client
     import symvi.dask
     client = Client("scheduler-address:8786")
@@ -20,14 +24,17 @@ here) and the same Python, NumPy and C ABI as the machine that compiled the pack
 """
 from __future__ import annotations
 
+import inspect
 from dataclasses import fields
 from pathlib import Path
 from types import ModuleType
-from typing import Mapping
+from typing import Callable, Mapping
 
 import numpy as np
 
-from ._runtime.batch import batch_items
+from ._runtime import arguments, batch_arguments
+from ._runtime.batch import integrate_many as _local_integrate_many
+from ._runtime.bvp_batch import solve_bvp_many as _local_solve_bvp_many
 from ._runtime.progress import Progress
 from ._runtime.results import BatchResult, BVPBatch, State, Status
 
@@ -36,55 +43,104 @@ def integrate_many(client, package: ModuleType, initial, n_steps: int, h,
                    params: Mapping | None = None, *, chunk: int = 1000,
                    progress: bool | None = None, **options) -> BatchResult:
     """``package.integrate_many`` on the workers of ``client`` (a
-    ``dask.distributed.Client``), ``chunk`` trajectories per task; ``options`` as there
-    (``workers=``: threads per task, default 1 — a Dask worker runs as many tasks at
-    once as it has threads). ``progress``: a bar of finished trajectories here, as in
-    the local call. Returns the :class:`BatchResult` the local call returns."""
-    item, B = batch_items(initial)
-    parts = _chunks(item, B, h, params, chunk)
-    options = {"workers": 1} | options | {"progress": False}
-    futures = [client.submit(_run_fields, _folder(package), "integrate_many",
-                             (_plain(start), n_steps, step),
-                             dict(options, params=values), where, pure=False)
-               for start, step, values, where in parts]
-    return BatchResult.joined([_batch(fields) for fields in
-                               _gathered(client, futures, B, "trajectories",
-                                                         progress)])
+    ``dask.distributed.Client``), ``chunk`` trajectories per task (a positive integer);
+    ``options`` as there (``workers=``: threads per task, default 1 — a Dask worker runs
+    as many tasks at once as it has threads). ``progress``: a bar of finished
+    trajectories here, as in the local call. Every argument is checked here, before any
+    task is submitted, by the local call's own checks and in its words (the memory
+    estimate counts the paths gathered here). Returns the :class:`BatchResult` the local
+    call returns."""
+    folder = _folder(package)
+    options = {"workers": 1} | options
+    batch = batch_arguments.trajectories(**_arguments(
+        _local_integrate_many, package.model, initial, n_steps, h, params, **options))
+    chunk = _chunk(chunk)
+    with Progress(batch.size, "trajectories", progress) as bar:
+        futures = [client.submit(_run_fields, folder, "integrate_many",
+                                 *_trajectory_task(batch, options, rows), pure=False)
+                   for rows in _ranges(batch.size, chunk)]
+        parts = _gathered(client, futures, bar)
+    return BatchResult.joined([_batch(fields) for fields in parts])
 
 
 def solve_bvp_many(client, package: ModuleType, starts, ends, n_steps: int, h=None,
                    params: Mapping | None = None, *, chunk: int = 10,
                    progress: bool | None = None, **options) -> BVPBatch:
-    """``package.solve_bvp_many`` on the workers of ``client``, ``chunk`` solves per task;
-    ``progress`` as in :func:`integrate_many`. Returns the :class:`BVPBatch` the local
-    call returns."""
-    options = options | {"progress": False}
-    start_of, B = batch_items(starts)
-    end_of = None if ends is None else batch_items(ends)[0]
-    futures = []
-    for a in range(0, B, chunk):
-        rows = range(a, min(a + chunk, B))
-        futures.append(client.submit(
-            _run, _folder(package), "solve_bvp_many",
-            (_gather(start_of, rows), None if end_of is None else _gather(end_of, rows),
-             n_steps, _rows(h, rows, B)),
-            dict(options, params=_rows_of(params, rows, B)), (a, rows[-1]), pure=False))
-    return BVPBatch.of([r for batch in _gathered(client, futures, B, "solves", progress)
-                        for r in batch.results])
+    """``package.solve_bvp_many`` on the workers of ``client``, ``chunk`` solves per task
+    (a positive integer); ``progress`` and the checks as in :func:`integrate_many` (the
+    memory estimate counts the results gathered here). Returns the :class:`BVPBatch` the
+    local call returns."""
+    folder = _folder(package)
+    batch = batch_arguments.solves(**_arguments(
+        _local_solve_bvp_many, package.model, starts, ends, n_steps, h, params, **options))
+    chunk = _chunk(chunk)
+    with Progress(batch.size, "solves", progress) as bar:
+        futures = [client.submit(_run, folder, "solve_bvp_many",
+                                 *_solve_task(batch, ends is None, options, rows), pure=False)
+                   for rows in _ranges(batch.size, chunk)]
+        parts = _gathered(client, futures, bar)
+    return BVPBatch.of([r for part in parts for r in part.results])
 
 
-def _gathered(client, futures: list, B: int, what: str, progress: bool | None) -> list:
-    """The futures' results in order, gathered as they finish (a bar counts the B
+def _arguments(local: Callable, model, *args, **options) -> dict:
+    """The arguments the local call ``local(model, *args, **options)`` would check, its
+    defaults filled in (``progress`` aside: the bar is here); a name it does not take is
+    refused as the call itself would refuse it."""
+    try:
+        bound = inspect.signature(local).bind(model, *args, **options)
+    except TypeError as exc:
+        raise TypeError(f"{local.__name__}(): {exc}") from None
+    bound.apply_defaults()
+    bound.arguments.pop("progress")
+    return dict(bound.arguments)
+
+
+def _chunk(chunk) -> int:
+    """Members per task: a positive integer, checked as the local calls check ``workers``."""
+    return arguments.count(chunk, "chunk", 1)
+
+
+def _ranges(B: int, chunk: int) -> list[range]:
+    """The members of each task."""
+    return [range(a, min(a + chunk, B)) for a in range(0, B, chunk)]
+
+
+def _trajectory_task(batch: batch_arguments.Trajectories, options: dict,
+                     rows: range) -> tuple[tuple, dict, tuple[int, int]]:
+    """(arguments, options, (first, last member)) of the local ``integrate_many`` for
+    the trajectories ``rows``."""
+    args = (_plain(_gather(batch.item, rows)), batch.n_steps,
+            batch.steps[rows.start:rows.stop])
+    own = {"params": batch.overrides.rows(rows.start, rows.stop), "progress": False}
+    return args, options | own, (rows.start, rows[-1])
+
+
+def _solve_task(batch: batch_arguments.Solves, free_end: bool, options: dict,
+                rows: range) -> tuple[tuple, dict, tuple[int, int]]:
+    """(arguments, options, (first, last member)) of the local ``solve_bvp_many`` for the
+    solves ``rows``: their boundary data, steps, parameters, horizons and guesses."""
+    steps = None if batch.steps is None else batch.steps[rows.start:rows.stop]
+    ends = None if free_end else _plain(_gather(batch.end_of, rows))
+    args = (_plain(_gather(batch.start_of, rows)), ends, batch.n_steps, steps)
+    own = {"params": batch.overrides.rows(rows.start, rows.stop), "progress": False}
+    if batch.horizons is not None:
+        own["T"] = batch.horizons[rows.start:rows.stop]
+    if batch.guesses is not None:
+        own["guesses"] = batch.guesses[rows.start:rows.stop]
+    return args, options | own, (rows.start, rows[-1])
+
+
+def _gathered(client, futures: list, bar: Progress) -> list:
+    """The futures' results in order, gathered as they finish (``bar`` counts the
     members); on an error or Ctrl-C the tasks not yet run are cancelled."""
     from distributed import as_completed
 
     index = {future.key: i for i, future in enumerate(futures)}
     out = [None] * len(futures)
     try:
-        with Progress(B, what, progress) as bar:
-            for future, result in as_completed(futures, with_results=True):
-                out[index[future.key]] = result
-                bar.update(len(result["statuses"] if isinstance(result, dict) else result))
+        for future, result in as_completed(futures, with_results=True):
+            out[index[future.key]] = result
+            bar.update(len(result["statuses"] if isinstance(result, dict) else result))
     except BaseException:
         client.cancel(futures)
         raise
@@ -139,14 +195,6 @@ def _folder(package: ModuleType) -> str:
     return str(Path(package.__file__).resolve().parent)
 
 
-def _chunks(item, B: int, h, params, chunk: int):
-    """(initial data, h, params, (first, last)) of each chunk of the batch of B members
-    ``item(b)``."""
-    for a in range(0, B, chunk):
-        rows = range(a, min(a + chunk, B))
-        yield _gather(item, rows), _rows(h, rows, B), _rows_of(params, rows, B), (a, rows[-1])
-
-
 def _gather(item, rows: range):
     """The members ``rows`` of batched data, batched again (the structure of ``item(b)``)."""
     members = [item(b) for b in rows]
@@ -160,14 +208,3 @@ def _gather(item, rows: range):
             return tuple(stack([v[i] for v in values]) for i in range(len(first)))
         return np.stack(values)
     return stack(members)
-
-
-def _rows(value, rows: range, B: int):
-    """A per-member value's rows, or the one value for all."""
-    if value is None or np.ndim(value) == 0:
-        return value
-    return np.broadcast_to(np.asarray(value, dtype=float), (B,))[rows.start:rows.stop]
-
-
-def _rows_of(params: Mapping | None, rows: range, B: int):
-    return None if params is None else {k: _rows(v, rows, B) for k, v in params.items()}

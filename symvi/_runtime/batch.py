@@ -12,18 +12,17 @@ exception is raised; no worker is left running.
 """
 from __future__ import annotations
 
-import os
 import threading
 from concurrent.futures import FIRST_EXCEPTION, ThreadPoolExecutor, wait
 from typing import Callable, Mapping
 
 import numpy as np
 
-from . import arguments, batch_loop, stepping
+from . import batch_loop, stepping
+from .batch_arguments import Trajectories, trajectories
 from .legendre import TransformError, first_fibres
-from .results import BatchResult, State, StepResult
-from .memory import require
 from .progress import Progress
+from .results import BatchResult, StepResult
 from .storage import bytes_per_node
 
 #: Tasks per worker: small enough tasks that a slow trajectory does not idle the others.
@@ -59,40 +58,34 @@ def integrate_many(model, initial, n_steps: int, h, params: Mapping | None = Non
     Returns a :class:`BatchResult`: every array of :class:`StepResult` with a leading
     batch axis, each trajectory's status and message (``statuses``, ``messages``), and
     ``result[b]``, trajectory b as the :class:`StepResult` of the single call. Its status
-    is SUCCESS only when every trajectory succeeded.
+    is SUCCESS only when every trajectory succeeded. Every argument, each trajectory's
+    step and parameters included, is checked before any work
+    (:func:`.batch_arguments.trajectories`), and a batch whose paths would not fit in
+    memory is refused with a ``MemoryError`` giving the estimate.
     """
-    item, B = batch_items(initial)
-    steps = per_trajectory(h, B, "h")
-    overrides = parameter_batch(params, B)
-    n_steps = stepping.step_count(model, n_steps)
-    keep = n_steps if final_only else arguments.count(keep_every, "keep_every", 1)
-    workers = arguments.count(workers if workers is not None else usable_cores(),
-                              "workers", 1)
-    maxiter = arguments.iterations(maxiter)
-    xtol, ftol = arguments.tolerance(xtol, "xtol"), arguments.tolerance(ftol, "ftol")
-    quantities = arguments.flag(quantities, "quantities")
-    _check_memory(model, B, n_steps, keep, quantities)
-    run = _Run(model, item, B, isinstance(initial, State), steps, overrides, n_steps, keep,
-               (maxiter, xtol, ftol), quantities)
-    long = bytes_per_node(model, quantities) * (n_steps + 1) > batch_loop.MAX_PATH_BYTES
-    with Progress(B, "trajectories", progress) as bar:
+    batch = trajectories(model, initial, n_steps, h, params, workers=workers,
+                         keep_every=keep_every, final_only=final_only, maxiter=maxiter,
+                         xtol=xtol, ftol=ftol, quantities=quantities)
+    run = _Run(model, batch)
+    long = bytes_per_node(model, batch.quantities) * (batch.n_steps + 1) \
+        > batch_loop.MAX_PATH_BYTES
+    with Progress(batch.size, "trajectories", progress) as bar:
         # long runs one by one through the chunked single loop: bounded memory
-        return (run.one_by_one if long else run.in_slices)(workers, bar)
+        return (run.one_by_one if long else run.in_slices)(batch.workers, bar)
 
 
 class _Run:
-    """A checked batch: its members' data and the two ways of running it."""
+    """A checked batch (:class:`.batch_arguments.Trajectories`) and the two ways of
+    running it."""
 
-    def __init__(self, model, item, B: int, from_state: bool, steps: np.ndarray, overrides,
-                 n_steps: int, keep: int, newton: tuple, quantities: bool):
-        self.model, self.item, self.B, self.from_state = model, item, B, from_state
-        self.steps, self.overrides, self.n_steps, self.keep = steps, overrides, n_steps, keep
-        self.newton, self.quantities = newton, quantities
+    def __init__(self, model, batch: Trajectories):
+        self.model, self.batch = model, batch
         self.stop = threading.Event()
 
     def one_by_one(self, workers: int, bar: Progress) -> BatchResult:
         """Each trajectory by :func:`.stepping.run_steps`, then stacked."""
-        results: list[StepResult | None] = [None] * self.B
+        batch = self.batch
+        results: list[StepResult | None] = [None] * batch.size
 
         def work(indices: np.ndarray) -> None:
             for b in indices:
@@ -100,41 +93,36 @@ class _Run:
                     return
                 with NamedErrors(b, self.stop):
                     results[b] = stepping.run_steps(
-                        self.model, self.item(b), self.n_steps, self.steps[b],
-                        self.overrides(b), *self.newton, self.keep, False, self.stop,
-                        self.quantities)
+                        self.model, batch.item(b), batch.n_steps, batch.steps[b],
+                        batch.overrides(b), *batch.newton, batch.keep, False, self.stop,
+                        batch.quantities)
                 bar.update()
-        run_threads(work, self.B, workers, self.stop)
+        run_threads(work, batch.size, workers, self.stop)
         return BatchResult.stacked(results)
 
     def in_slices(self, workers: int, bar: Progress) -> BatchResult:
         """Slices of trajectories by one C call each, stored into one stacked result."""
-        stacked = batch_loop.Stacked(self.model, self.B, self.n_steps, self.keep,
-                                     self.quantities)
-        per_slice = max(1, batch_loop.SLICE_STEPS // self.n_steps)
+        batch = self.batch
+        stacked = batch_loop.Stacked(self.model, batch.size, batch.n_steps, batch.keep,
+                                     batch.quantities)
+        per_slice = max(1, batch_loop.SLICE_STEPS // batch.n_steps)
 
         def work(indices: np.ndarray) -> None:
             parts = np.array_split(indices, -(-len(indices) // per_slice))
-            buffers = batch_loop.Scratch(stacked.fields, len(parts[0]), self.n_steps)
+            buffers = batch_loop.Scratch(stacked.fields, len(parts[0]), batch.n_steps)
             for part in parts:
                 if self.stop.is_set():
                     return
-                P, H = self._slice_data(part)
-                starts = _starts(self.model, self.item, part, H, P, self.from_state, self.stop)
+                # the parameters and steps were checked with the arguments
+                P = np.ascontiguousarray(batch.parameters[part])
+                H = np.array(batch.steps[part], dtype=np.float64)
+                starts = _starts(self.model, batch.item, part, H, P, batch.from_state,
+                                 self.stop)
                 batch_loop.run_slice(self.model, stacked, buffers, part, starts,
-                                     self.n_steps, P, H, self.from_state, *self.newton)
+                                     batch.n_steps, P, H, batch.from_state, *batch.newton)
                 bar.update(len(part))
-        run_threads(work, self.B, workers, self.stop)
+        run_threads(work, batch.size, workers, self.stop)
         return stacked.result()
-
-    def _slice_data(self, part: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """The parameter rows and steps of the trajectories ``part``."""
-        P, H = [], np.empty(len(part))
-        for j, b in enumerate(part):
-            with NamedErrors(b, self.stop):
-                P.append(self.model.params(self.overrides(b)))
-                H[j] = arguments.step_size(self.steps[b])
-        return np.ascontiguousarray(np.stack(P)), H
 
 
 def _starts(model, item, part: np.ndarray, H: np.ndarray, P: np.ndarray, from_state: bool,
@@ -197,76 +185,3 @@ def run_threads(work: Callable[[np.ndarray], None], B: int, workers: int,
             for future in futures:
                 future.cancel()
             raise
-
-
-def batch_items(initial) -> tuple[Callable[[int], object], int]:
-    """(b ↦ trajectory b's initial data, B) for batched initial data (see
-    :func:`integrate_many`); the arrays must agree on B."""
-    leaves: list[tuple[str, np.ndarray]] = []
-
-    def collect(value, where: str):
-        if isinstance(value, State):
-            return State(**{k: collect(getattr(value, k), f"{where}.{k}")
-                            for k in ("v", "x", "g") if getattr(value, k) is not None})
-        if isinstance(value, tuple):
-            return tuple(collect(part, f"{where}[{i}]") for i, part in enumerate(value))
-        array = arguments.real_array(value, where)
-        if array.ndim == 0:
-            raise ValueError(f"{where}: a batch needs a leading batch axis, got a scalar")
-        leaves.append((where, array))
-        return array
-
-    structure = collect(initial, "initial")
-    sizes = {where: array.shape[0] for where, array in leaves}
-    if len(set(sizes.values())) > 1:
-        raise ValueError("initial: the arrays disagree on the batch size (the leading "
-                         "axis): " + ", ".join(f"{w} has {n}" for w, n in sizes.items()))
-    B = next(iter(sizes.values()))
-    if B == 0:
-        raise ValueError("initial: the batch is empty")
-
-    def item(b: int, value=structure):
-        if isinstance(value, State):
-            return State(**{k: item(b, getattr(value, k)) for k in ("v", "x", "g")
-                            if getattr(value, k) is not None})
-        if isinstance(value, tuple):
-            return tuple(item(b, part) for part in value)
-        return value[b]
-    return item, B
-
-
-def parameter_batch(params: Mapping | None, B: int) -> Callable[[int], dict | None]:
-    """b ↦ trajectory b's parameter overrides; each value a number or B of them."""
-    if params is None:
-        return lambda b: None
-    if not isinstance(params, Mapping):
-        raise ValueError(f"params must be a mapping name → value(s), got {type(params).__name__}")
-    columns = {name: per_trajectory(value, B, f"params[{name!r}]")
-               for name, value in params.items()}
-    return lambda b: {name: column[b] for name, column in columns.items()}
-
-
-def per_trajectory(value, B: int, what: str) -> np.ndarray:
-    array = arguments.real_array(value, what)
-    try:
-        return np.broadcast_to(array, (B,))
-    except ValueError:
-        raise ValueError(f"{what}: shape {array.shape} does not broadcast against the batch "
-                         f"of {B} trajectories (give one value, or {B})") from None
-
-
-def usable_cores() -> int:
-    try:
-        return len(os.sched_getaffinity(0))
-    except AttributeError:         # not on Linux
-        return os.cpu_count() or 1
-
-
-def _check_memory(model, B: int, n_steps: int, keep: int, quantities: bool) -> None:
-    """Refuse a batch whose paths (with their ``quantities`` or without) would not fit,
-    before running it: each path is held twice (its own result, then the stacked arrays)."""
-    nodes = n_steps // keep + 2
-    require(2.0 * B * nodes * bytes_per_node(model, quantities),
-            f"a batch of {B:,} paths of {nodes:,} stored nodes",
-            "store every k-th node (keep_every=k) or only the final one (final_only=True)")
-

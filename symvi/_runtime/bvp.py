@@ -32,6 +32,24 @@ from .results import BVPResult, Status
 from .storage import check_path_memory as check_memory
 
 
+def solve_steps(model, n_steps: int, from_states: bool) -> int:
+    """N of a whole-trajectory solve of ``model``, checked: the model must have such a
+    solve (and take States as boundary data where they are given), and N leaves a free
+    node between the fixed ends."""
+    info = model.info
+    if not info["whole_trajectory"]:
+        raise ValueError(f"model {model.name!r}: no whole-trajectory solve on kind "
+                         f"{info['kind']!r}")
+    if from_states:
+        boundary_states.check_supported(model)
+    r = model.order
+    return arguments.count(n_steps, "n_steps", 2 * r - from_states, why=(
+        " (States fix the first and last elements, and one free node lies between them)"
+        if from_states else
+        f" ({r} fixed node{'s' if r > 1 else ''} at each end of an order-{r} problem and at "
+        f"least one free node between them)"))
+
+
 def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
               params: Mapping[str, float] | None = None, *, T: float | None = None,
               guess: str | np.ndarray | tuple | BVPResult | None = None,
@@ -104,18 +122,8 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
         iteration history) instead of returning a failed result.
     """
     info = model.info
-    if not info["whole_trajectory"]:
-        raise ValueError(f"model {model.name!r}: no whole-trajectory solve on kind "
-                         f"{info['kind']!r}")
-    r = model.order
     from_states = boundary_states.given(start, end)
-    if from_states:
-        boundary_states.check_supported(model)
-    N = arguments.count(n_steps, "n_steps", 2 * r - from_states, why=(
-        " (States fix the first and last elements, and one free node lies between them)"
-        if from_states else
-        f" ({r} fixed node{'s' if r > 1 else ''} at each end of an order-{r} problem and at "
-        f"least one free node between them)"))
+    N = solve_steps(model, n_steps, from_states)
     h, p = arguments.step_of(h, T, N), model.params(params)
     xtol, ftol = arguments.tolerance(xtol, "xtol"), arguments.tolerance(ftol, "ftol")
     maxiter = arguments.iterations(maxiter)

@@ -15,8 +15,8 @@ from typing import Mapping
 
 import numpy as np
 
-from . import arguments
-from .batch import NamedErrors, per_trajectory, run_threads, usable_cores, batch_items, parameter_batch
+from .batch import NamedErrors, run_threads
+from .batch_arguments import points, solves
 from .bvp import solve_bvp
 from .progress import Progress
 from .results import BVPBatch, BVPResult
@@ -42,18 +42,14 @@ def solve_bvp_many(model, starts, ends, n_steps: int, h=None, params: Mapping | 
 
     Returns a :class:`BVPBatch`: ``result[b]`` is solve b's :class:`BVPResult`, ``cost``,
     ``T`` and ``statuses`` are arrays over the batch; SUCCESS only when every solve
-    succeeded. Ctrl-C stops after the solves under way.
+    succeeded. Ctrl-C stops after the solves under way. Every argument, each solve's step
+    or horizon and parameters included, is checked before any solve
+    (:func:`.batch_arguments.solves`), and a batch whose results would not fit in memory
+    together is refused with a ``MemoryError`` giving the estimate.
     """
-    start_of, B = batch_items(starts)
-    end_of = (lambda b: None) if ends is None else _same_batch(ends, B)
-    steps = None if h is None else per_trajectory(h, B, "h")
-    horizons = None if T is None else per_trajectory(T, B, "T")
-    overrides = parameter_batch(params, B)
-    if guesses is not None and len(guesses) != B:
-        raise ValueError(f"guesses: {len(guesses)} given for a batch of {B} solves")
-    workers = arguments.count(workers if workers is not None else usable_cores(),
-                              "workers", 1)
-    results: list[BVPResult | None] = [None] * B
+    batch = solves(model, starts, ends, n_steps, h, params, T=T, guesses=guesses,
+                   workers=workers, options=options)
+    results: list[BVPResult | None] = [None] * batch.size
     stop = threading.Event()
 
     def work(indices: np.ndarray) -> None:
@@ -62,13 +58,15 @@ def solve_bvp_many(model, starts, ends, n_steps: int, h=None, params: Mapping | 
                 return
             with NamedErrors(b, stop, "solve"):
                 results[b] = solve_bvp(
-                    model, start_of(b), end_of(b), n_steps,
-                    None if steps is None else float(steps[b]), overrides(b),
-                    T=None if horizons is None else float(horizons[b]),
-                    guess=None if guesses is None else guesses[b], **options)
+                    model, batch.start_of(b), batch.end_of(b), batch.n_steps,
+                    None if batch.steps is None else float(batch.steps[b]),
+                    batch.overrides(b),
+                    T=None if batch.horizons is None else float(batch.horizons[b]),
+                    guess=None if batch.guesses is None else batch.guesses[b],
+                    **batch.options)
             bar.update()
-    with Progress(B, "solves", progress) as bar:
-        run_threads(work, B, workers, stop)
+    with Progress(batch.size, "solves", progress) as bar:
+        run_threads(work, batch.size, batch.workers, stop)
     return BVPBatch.of(results)
 
 
@@ -90,31 +88,20 @@ def continuation(model, start, end, n_steps: int, h=None, path: Mapping | None =
     options : ``maxiter``, ``xtol``, ``ftol`` of :func:`.bvp.solve_bvp`.
 
     Returns a :class:`BVPBatch` of the K solves in order, whose message names the
-    failures.
+    failures. Every argument, each point's parameters included, is checked before the
+    first solve (:func:`.batch_arguments.points`), and a path whose results would not fit
+    in memory together is refused with a ``MemoryError`` giving the estimate.
     """
-    if not path:
-        raise ValueError("continuation needs a path: parameter names → sequences of values")
-    columns = {name: np.atleast_1d(arguments.real_array(values, f"path[{name!r}]"))
-               for name, values in path.items()}
-    lengths = {name: len(values) for name, values in columns.items()}
-    if len(set(lengths.values())) != 1:
-        raise ValueError(f"path: the sequences differ in length: {lengths}")
-    K = next(iter(lengths.values()))
+    checked = points(model, start, end, n_steps, h, path, T=T, params=params,
+                     options=options)
     results, previous = [], guess
-    with Progress(K, "solves", progress) as bar:
-        for k in range(K):
-            point = dict(params or {}) | {name: values[k] for name, values in columns.items()}
-            result = solve_bvp(model, start, end, n_steps, h, point, T=T, guess=previous,
-                               **options)
+    with Progress(checked.size, "solves", progress) as bar:
+        for point in checked.points:
+            result = solve_bvp(model, start, end, checked.n_steps, h, point, T=T,
+                               guess=previous, **checked.options)
             results.append(result)
             bar.update()
             if result.success:
                 previous = result
     return BVPBatch.of(results)
 
-
-def _same_batch(ends, B: int):
-    end_of, size = batch_items(ends)
-    if size != B:
-        raise ValueError(f"ends: {size} given for a batch of {B} starts")
-    return end_of

@@ -1,0 +1,385 @@
+"""The arguments of the batch calls, checked before any work (issue 48).
+
+``integrate_many``, ``solve_bvp_many`` and ``continuation`` (``batch.py``,
+``bvp_batch.py``), and the Dask calls of ``symvi/dask.py``, check what they are given with
+the functions here, and only here: the batch's size from its data (zero members is an
+error, not an empty success), every per-member value against it, the options, each
+member's step and parameters, and the memory the results will hold. A bad argument is
+refused with one message — the same on a cluster as on threads — before a thread or a
+task starts. What only the model's kernels can judge (a configuration off its group, a
+singular Legendre transform, boundary data of the wrong shape) is found in the run, which
+stops every worker at the first and names the member.
+"""
+from __future__ import annotations
+
+import os
+from dataclasses import dataclass
+from typing import Callable, Mapping
+
+import numpy as np
+
+from . import arguments, boundary_states, stepping
+from .memory import require
+from .results import State
+from .bvp import solve_steps
+from .storage import bytes_per_node, check_path_memory
+
+#: How a batch calls its members, one and many: "trajectory 2", "a batch of 4 solves".
+TRAJECTORIES = ("trajectory", "trajectories")
+SOLVES = ("solve", "solves")
+
+#: The options of :func:`.bvp.solve_bvp` that a batch of solves passes on to each solve.
+SOLVE_OPTIONS = ("maxiter", "xtol", "ftol")
+
+
+@dataclass(frozen=True)
+class Overrides:
+    """Parameter overrides per member: name → one value per member, or None for the
+    compiled defaults. ``uniform``: every override was one value for all."""
+
+    columns: Mapping[object, np.ndarray] | None
+    uniform: bool
+
+    def __call__(self, b: int) -> dict | None:
+        """Member b's overrides, as the single call takes them."""
+        if self.columns is None:
+            return None
+        return {name: column[b] for name, column in self.columns.items()}
+
+    def rows(self, start: int, stop: int) -> dict | None:
+        """The overrides of members start … stop − 1, batched again."""
+        if self.columns is None:
+            return None
+        return {name: column[start:stop] for name, column in self.columns.items()}
+
+
+@dataclass(frozen=True)
+class Trajectories:
+    """``integrate_many``'s arguments, checked: member b starts from ``item(b)`` with the
+    step ``steps[b]`` and the parameter vector ``parameters[b]`` (``overrides(b)`` as
+    given); ``newton`` is (maxiter, xtol, ftol)."""
+
+    item: Callable[[int], object]
+    size: int
+    from_state: bool
+    steps: np.ndarray
+    overrides: Overrides
+    parameters: np.ndarray
+    n_steps: int
+    keep: int
+    workers: int
+    newton: tuple[int, float, float]
+    quantities: bool
+
+
+@dataclass(frozen=True)
+class Solves:
+    """``solve_bvp_many``'s arguments, checked: solve b from ``start_of(b)`` to
+    ``end_of(b)`` (None without fixed ends), with ``steps[b]`` or ``horizons[b]`` (the
+    other None), ``overrides(b)`` and ``guesses[b]``; ``options`` go to every solve."""
+
+    start_of: Callable[[int], object]
+    end_of: Callable[[int], object]
+    size: int
+    n_steps: int
+    steps: np.ndarray | None
+    horizons: np.ndarray | None
+    overrides: Overrides
+    guesses: list | None
+    workers: int
+    options: dict
+
+
+@dataclass(frozen=True)
+class Points:
+    """``continuation``'s arguments, checked: the overrides of each of its ``size``
+    points, and the ``options`` of every solve."""
+
+    points: list[dict]
+    size: int
+    n_steps: int
+    options: dict
+
+
+def trajectories(model, initial, n_steps: int, h, params: Mapping | None, *,
+                 workers: int | None, keep_every: int, final_only: bool, maxiter: int,
+                 xtol: float, ftol: float, quantities: bool) -> Trajectories:
+    """The arguments of ``integrate_many`` (its docstring says what each is), checked in
+    full: the batch, the options, the memory of the stacked paths, then each member's
+    step and parameters."""
+    item, B = batch_items(initial, "initial", TRAJECTORIES)
+    steps = per_member(h, B, "h", TRAJECTORIES)
+    overrides = parameter_batch(params, B, TRAJECTORIES)
+    n_steps = stepping.step_count(model, n_steps)
+    keep = arguments.count(keep_every, "keep_every", 1)
+    keep = n_steps if arguments.flag(final_only, "final_only") else keep
+    workers = worker_count(workers)
+    newton = (arguments.iterations(maxiter), arguments.tolerance(xtol, "xtol"),
+              arguments.tolerance(ftol, "ftol"))
+    quantities = arguments.flag(quantities, "quantities")
+    _paths_fit(model, B, n_steps, keep, quantities)
+    _positive(steps, np.ndim(h) == 0, TRAJECTORIES, arguments.step_size)
+    parameters = _parameter_vectors(model, overrides, B, TRAJECTORIES)
+    return Trajectories(item, B, isinstance(initial, State), steps, overrides, parameters,
+                        n_steps, keep, workers, newton, quantities)
+
+
+def solves(model, starts, ends, n_steps: int, h, params: Mapping | None, *, T,
+           guesses: list | None, workers: int | None, options: Mapping) -> Solves:
+    """The arguments of ``solve_bvp_many`` (its docstring says what each is), checked in
+    full: the batch, the options, the model's whole-trajectory solve and N, the memory of
+    the results, then each solve's step or horizon and parameters."""
+    start_of, B = batch_items(starts, "starts", SOLVES)
+    end_of = (lambda b: None) if ends is None else _same_batch(ends, B)
+    steps = None if h is None else per_member(h, B, "h", SOLVES)
+    horizons = None if T is None else per_member(T, B, "T", SOLVES)
+    overrides = parameter_batch(params, B, SOLVES)
+    guesses = _guesses(guesses, B)
+    workers = worker_count(workers)
+    options = solve_options(options, "solve_bvp_many")
+    from_states = boundary_states.given(starts, ends)
+    N = solve_steps(model, n_steps, from_states)
+    check_path_memory(model, N + from_states)     # each solve's matrices, before any
+    _results_fit(model, B, N, from_states, f"a batch of {B:,} solves",
+                 "solve the batch in parts (keeping only what each needs) or with fewer "
+                 "steps")
+    _steps_or_horizons(h, T, steps, horizons, N)
+    _parameter_vectors(model, overrides, B, SOLVES)
+    return Solves(start_of, end_of, B, N, steps, horizons, overrides, guesses, workers,
+                  options)
+
+
+def points(model, start, end, n_steps: int, h, path: Mapping | None, *, T,
+           params: Mapping | None, options: Mapping) -> Points:
+    """The arguments of ``continuation`` (its docstring says what each is), checked in
+    full: the path, N, the step, the options, the memory of the results, then each
+    point's parameters."""
+    columns = _path_columns(path)
+    if params is not None and not isinstance(params, Mapping):
+        raise ValueError(f"params must be a mapping name → value, got "
+                         f"{type(params).__name__}")
+    K = len(next(iter(columns.values())))
+    from_states = boundary_states.given(start, end)
+    N = solve_steps(model, n_steps, from_states)
+    check_path_memory(model, N + from_states)
+    arguments.step_of(h, T, N)
+    options = solve_options(options, "continuation")
+    _results_fit(model, K, N, from_states, f"a continuation of {K:,} solves",
+                 "split the path into parts, each warm-started from the last result of "
+                 "the one before (guess=), keeping only what each needs")
+    fixed = dict(params or {})
+    overrides = [fixed | {name: values[k] for name, values in columns.items()}
+                 for k in range(K)]
+    _each(SOLVES, K, lambda k: model.params(overrides[k]))
+    return Points(overrides, K, N, options)
+
+
+def batch_items(value, what: str, kind: tuple[str, str]) -> tuple[Callable[[int], object], int]:
+    """(b ↦ member b's data, B) for data batched on a leading axis (``integrate_many``'s
+    ``initial``: a State or tuple structure of arrays, every array batched); the arrays
+    must agree on B, and B ≥ 1. ``what`` names the argument, ``kind`` its members."""
+    leaves: list[tuple[str, np.ndarray]] = []
+
+    def collect(value, where: str):
+        if isinstance(value, State):
+            return State(**{k: collect(getattr(value, k), f"{where}.{k}")
+                            for k in ("v", "x", "g") if getattr(value, k) is not None})
+        if isinstance(value, tuple):
+            return tuple(collect(part, f"{where}[{i}]") for i, part in enumerate(value))
+        array = arguments.real_array(value, where)
+        if array.ndim == 0:
+            raise ValueError(f"{where}: a batch needs a leading batch axis, got a scalar")
+        leaves.append((where, array))
+        return array
+
+    structure = collect(value, what)
+    sizes = {where: array.shape[0] for where, array in leaves}
+    if not sizes:
+        raise ValueError(f"{what}: no arrays given")
+    if len(set(sizes.values())) > 1:
+        raise ValueError(f"{what}: the arrays disagree on the batch size (the leading "
+                         "axis): " + ", ".join(f"{w} has {n}" for w, n in sizes.items()))
+    B = next(iter(sizes.values()))
+    if B == 0:
+        raise ValueError(f"{what}: the batch is empty (zero {kind[1]}); give at least one")
+
+    def item(b: int, value=structure):
+        if isinstance(value, State):
+            return State(**{k: item(b, getattr(value, k)) for k in ("v", "x", "g")
+                            if getattr(value, k) is not None})
+        if isinstance(value, tuple):
+            return tuple(item(b, part) for part in value)
+        return value[b]
+    return item, B
+
+
+def per_member(value, B: int, what: str, kind: tuple[str, str]) -> np.ndarray:
+    """``value`` — one number, or one per member — as B numbers."""
+    array = arguments.real_array(value, what)
+    try:
+        return np.broadcast_to(array, (B,))
+    except ValueError:
+        raise ValueError(f"{what}: shape {array.shape} does not broadcast against the batch "
+                         f"of {B} {kind[1]} (give one value, or {B})") from None
+
+
+def parameter_batch(params: Mapping | None, B: int, kind: tuple[str, str]) -> Overrides:
+    """The overrides of B members: each value a number or B of them."""
+    if params is None:
+        return Overrides(None, True)
+    if not isinstance(params, Mapping):
+        raise ValueError(f"params must be a mapping name → value(s), got "
+                         f"{type(params).__name__}")
+    columns = {name: per_member(value, B, f"params[{name!r}]", kind)
+               for name, value in params.items()}
+    return Overrides(columns, all(np.ndim(value) == 0 for value in params.values()))
+
+
+def usable_cores() -> int:
+    """The cores this process may run on."""
+    try:
+        return len(os.sched_getaffinity(0))
+    except AttributeError:         # not on Linux
+        return os.cpu_count() or 1
+
+
+def worker_count(workers: int | None) -> int:
+    """Threads of a batch: at least one; None for the usable cores."""
+    return arguments.count(workers if workers is not None else usable_cores(), "workers", 1)
+
+
+def solve_options(options: Mapping, call: str) -> dict:
+    """The options a batch of solves passes to each (``maxiter``, ``xtol``, ``ftol`` of
+    :func:`.bvp.solve_bvp`), checked; any other name is refused."""
+    unknown = sorted(set(options) - set(SOLVE_OPTIONS))
+    if unknown:
+        raise TypeError(f"{call}: unknown option(s) {', '.join(map(repr, unknown))}; it "
+                        f"passes {', '.join(SOLVE_OPTIONS)} on to solve_bvp (a batch keeps "
+                        f"each failure in its result, it does not raise)")
+    checked = dict(options)
+    if "maxiter" in checked:
+        checked["maxiter"] = arguments.iterations(checked["maxiter"])
+    for name in set(checked) & {"xtol", "ftol"}:
+        checked[name] = arguments.tolerance(checked[name], name)
+    return checked
+
+
+def result_bytes(model, n_steps: int, from_states: bool) -> float:
+    """Bytes one solve's result holds: per node its time, base point, configuration and
+    fibre, the multipliers, controls, bound multipliers and active flags of its window;
+    from States also the solved states and their times."""
+    info = model.info
+    configuration = info["configuration_dim"]
+    inequalities = len(model.inequalities)
+    per_node = 8 * (1 + model.m + configuration + model.n + model.constraints
+                    + int(info.get("controls") or 0) + inequalities) + inequalities
+    if from_states:
+        per_node += 8 * (1 + model.m + configuration + model.n)
+    return float((n_steps + 1 + from_states) * per_node)
+
+
+def _paths_fit(model, B: int, n_steps: int, keep: int, quantities: bool) -> None:
+    """Refuse a batch whose paths (with their ``quantities`` or without) would not fit:
+    each is held twice — its own result, then the stacked arrays (on a cluster: the
+    chunks gathered, then joined)."""
+    nodes = n_steps // keep + 2
+    require(2.0 * B * nodes * bytes_per_node(model, quantities),
+            f"a batch of {B:,} paths of {nodes:,} stored nodes",
+            "store every k-th node (keep_every=k) or only the final one (final_only=True)")
+
+
+def _results_fit(model, count: int, N: int, from_states: bool, what: str, hint: str) -> None:
+    """Refuse ``count`` solves whose results would not fit together (each solve's own
+    matrices: :func:`.storage.check_path_memory`)."""
+    require(count * result_bytes(model, N, from_states),
+            f"{what} with N = {N:,} ({result_bytes(model, N, from_states) / 2**20:.3g} MiB "
+            f"each)", hint)
+
+
+def _positive(values: np.ndarray | None, uniform: bool, kind: tuple[str, str],
+              check: Callable[[float], float]) -> None:
+    """Every member's step (or horizon) positive and finite: where one is not, ``check``
+    (the single call's) refuses it — naming the member unless one value was given for
+    all."""
+    if values is None:
+        return
+    bad = np.flatnonzero(~(np.isfinite(values) & (values > 0)))
+    if bad.size and uniform:
+        check(float(values[0]))
+    elif bad.size:
+        _named(kind, int(bad[0]), check, float(values[bad[0]]))
+
+
+def _steps_or_horizons(h, T, steps: np.ndarray | None, horizons: np.ndarray | None,
+                       N: int) -> None:
+    """Exactly one of h and T given, and each solve's positive and finite."""
+    if (h is None) == (T is None):       # neither or both: one message for the batch
+        arguments.step_of(h, T, N)
+    if T is None:
+        _positive(steps, np.ndim(h) == 0, SOLVES, lambda v: arguments.step_of(v, None, N))
+    else:
+        _positive(horizons, np.ndim(T) == 0, SOLVES, lambda v: arguments.step_of(None, v, N))
+
+
+def _parameter_vectors(model, overrides: Overrides, B: int,
+                       kind: tuple[str, str]) -> np.ndarray:
+    """(B, P) the members' parameter vectors; one check when the overrides are the same
+    for all (its message then names no member)."""
+    if overrides.uniform:
+        vector = model.params(overrides(0))
+        return np.broadcast_to(vector, (B, vector.size))
+    return np.stack(_each(kind, B, lambda b: model.params(overrides(b))))
+
+
+def _each(kind: tuple[str, str], count: int, check: Callable[[int], object]) -> list:
+    """``check(b)`` of every member b < count, naming the member where one fails."""
+    return [_named(kind, b, check, b) for b in range(count)]
+
+
+def _named(kind: tuple[str, str], b: int, check: Callable, *args):
+    """``check(*args)``, its ValueError re-raised naming member b ("solve 3: …")."""
+    try:
+        return check(*args)
+    except ValueError as exc:
+        raise ValueError(f"{kind[0]} {b}: {exc}") from None
+
+
+def _same_batch(ends, B: int) -> Callable[[int], object]:
+    end_of, size = batch_items(ends, "ends", SOLVES)
+    if size != B:
+        raise ValueError(f"ends: {size} given for a batch of {B} starts")
+    return end_of
+
+
+def _guesses(guesses, B: int) -> list | None:
+    """One first guess per solve, or None."""
+    if guesses is None:
+        return None
+    if isinstance(guesses, (str, bytes, Mapping)) or not hasattr(guesses, "__len__"):
+        raise ValueError(f"guesses must be a list of one guess per solve (or None), got "
+                         f"{type(guesses).__name__}")
+    if len(guesses) != B:
+        raise ValueError(f"guesses: {len(guesses)} given for a batch of {B} solves")
+    return list(guesses)
+
+
+def _path_columns(path) -> dict[object, np.ndarray]:
+    """A continuation's path: parameter names → K ≥ 1 values each."""
+    if path is not None and not isinstance(path, Mapping):
+        raise ValueError(f"path must be a mapping parameter name → sequence of values, got "
+                         f"{type(path).__name__}")
+    if not path:
+        raise ValueError("continuation needs a path: parameter names → sequences of values")
+    columns = {name: np.atleast_1d(arguments.real_array(values, f"path[{name!r}]"))
+               for name, values in path.items()}
+    for name, values in columns.items():
+        if values.ndim != 1:
+            raise ValueError(f"path[{name!r}] must be a sequence of numbers, got shape "
+                             f"{values.shape}")
+    lengths = {name: len(values) for name, values in columns.items()}
+    if len(set(lengths.values())) != 1:
+        raise ValueError(f"path: the sequences differ in length: {lengths}")
+    if not next(iter(lengths.values())):
+        raise ValueError("path: the sequences are empty (zero solves); give at least one "
+                         "value")
+    return columns
