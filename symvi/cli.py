@@ -2,7 +2,10 @@
 ``symvi list``.
 
 Exit codes: 0 success, 1 a build, a solve or a check failed, 2 bad input (model or
-arguments).
+arguments), with one line on stderr in argparse's words (``symvi run: error: ...``).
+Every argument — numbers, the files to write, the checks to run — is checked before
+anything is compiled or run: a bad one costs no build, and no finished run is lost to
+a file name that cannot be written.
 """
 from __future__ import annotations
 
@@ -10,8 +13,6 @@ import argparse
 import contextlib
 import cProfile
 import importlib
-import importlib.util
-import math
 import pstats
 import shutil
 import sys
@@ -19,9 +20,11 @@ import textwrap
 import time
 import warnings
 from pathlib import Path
+from typing import Callable, Iterator
 
 import numpy as np
 
+from . import cli_arguments as arguments
 from .version import __version__
 from .errors import BuildError, ModelError
 from .checks.budget import DEFAULT_BUDGET
@@ -39,14 +42,19 @@ def _show_warning(message, category, filename, lineno, file=None, line=None) -> 
 
 def _compile(args) -> int:
     from .build import compile_model
-    model = load(args.model)
+    from .build.stages import StageClock
+    # --timeout counts from here: loading the model file is the build's first stage
+    clock = StageClock(args.model, args.timeout, None if args.quiet else _to_stderr,
+                       args.verbose)
+    with clock.stage("load model"):
+        model = _load(args.model)
     _warn_if_shadowed(args.model, model.name)
     start = time.perf_counter()
     profiler = cProfile.Profile() if args.profile else contextlib.nullcontext()
     with warnings.catch_warnings(), profiler:
         warnings.showwarning = _show_warning
         compile_model(model, args.output, force=args.force, verbose=args.verbose,
-                      timeout=args.timeout, progress=None if args.quiet else _to_stderr)
+                      clock=clock)
     target = Path(args.output) / model.name
     print(f"{model.name}: {target} ready in {time.perf_counter() - start:.2f} s "
           f"(import {model.name} with {args.output} on sys.path)")
@@ -68,17 +76,14 @@ def _print_profile(profiler: cProfile.Profile) -> None:
 
 def _run(args) -> int:
     from .build import compile_model
-    model = load(args.model)
-    if model.example is None:
-        raise ModelError(f"model {model.name!r} declares no example run")
-    params = _parameters(args.param, model)
-    if args.plot:
-        _check_plot_support()
+    arguments.check_run_arguments(args)
+    model = _load(args.model)
+    ex = _example(model)
+    params = arguments.parameters(args.param, model)
+    steps = arguments.steps(args.steps, model, ex)
     start = time.perf_counter()
     module = compile_model(model, args.build_dir)
     built = time.perf_counter() - start
-    ex = model.example
-    steps = args.steps if args.steps is not None else ex.n_steps
     # an optimal-control example keeps its horizon when only the steps change
     h = args.h if args.h is not None else \
         ex.h * ex.n_steps / steps if ex.whole_trajectory else ex.h
@@ -89,6 +94,38 @@ def _run(args) -> int:
     result = (_solve if ex.whole_trajectory else _integrate)(module, ex, steps, h, params, args)
     _outputs(result, model, module, args)
     return 0 if result.success else 1
+
+
+def _load(spec: str, loader: Callable = load):
+    """``loader(spec)`` (the model; :func:`symvi.models.load_with_equations` for the
+    checks) with a model file's folder first on ``sys.path`` while the file runs, as
+    ``python model.py`` has it: the file may import the modules beside it."""
+    with _folder_on_path(spec):
+        return loader(spec)
+
+
+@contextlib.contextmanager
+def _folder_on_path(spec: str) -> Iterator[None]:
+    """The folder of the model file ``spec`` first on ``sys.path`` inside the block (a
+    bundled model's name: nothing), removed after it: the build and the run import the
+    generated package, which a model file named like its model would shadow."""
+    if Path(spec).suffix != ".py":
+        yield
+        return
+    folder = str(Path(spec).parent.resolve())
+    sys.path.insert(0, folder)
+    try:
+        yield
+    finally:
+        with contextlib.suppress(ValueError):     # the file took it out itself
+            sys.path.remove(folder)
+
+
+def _example(model):
+    """The example run ``model`` declares (``symvi run`` and ``symvi sweep`` run it)."""
+    if model.example is None:
+        raise ModelError(f"model {model.name!r} declares no example run")
+    return model.example
 
 
 def _integrate(module, ex, steps: int, h: float, params: dict, args):
@@ -153,10 +190,10 @@ def _solve(module, ex, steps: int, h: float, params: dict, args):
 
 def _outputs(result, model, module, args) -> None:
     """``--output`` (the result's arrays, its ``save``) and ``--plot``."""
-    if args.output:
+    if args.output is not None:
         result.save(args.output)
         print(f"output     {args.output}")
-    if args.plot:
+    if args.plot is not None:
         from .plots import plot_result
         plot_result(result, model, module.INFO, args.plot)
         print(f"plot       {args.plot}")
@@ -166,32 +203,15 @@ def _sweep(args) -> int:
     """``symvi sweep``: the example once per value of one swept parameter or step."""
     from .build import compile_model
     from .sweep import run_sweep
-    model = load(args.model)
-    ex = model.example
-    if ex is None:
-        raise ModelError(f"model {model.name!r} declares no example run")
-    swept = [item for item in args.param or () if ":" in item.partition("=")[2]]
-    h_values = _range(args.h, "--h") if args.h is not None else None
-    if len(swept) + (h_values is not None) != 1:
-        raise ValueError("sweep one quantity: give exactly one --param NAME=start:stop:count "
-                         "or --h start:stop:count (the other --param values are fixed)")
-    params = _parameters([item for item in args.param or () if item not in swept], model)
-    if swept:
-        name, _, text = swept[0].partition("=")
-        name = _parameter_name(name, model)
-        values = _range(text, f"--param {name}")
-    else:
-        name, values = "h", h_values
-    if name == "h" and ex.whole_trajectory:
-        raise ValueError("an optimal-control sweep varies a parameter; the step of a whole "
-                         "trajectory follows from --steps and its horizon")
-    if args.spacing == "log":
-        values = _geometric(values, f"--{'param ' + name if swept else 'h'}")
-    if args.plot:
-        _check_plot_support()
-    steps = args.steps if args.steps is not None else ex.n_steps
-    h = float(args.h) if args.h is not None and h_values is None else \
+    arguments.check_sweep_arguments(args)
+    model = _load(args.model)
+    ex = _example(model)
+    name, values, params = arguments.swept(args, model, ex)
+    steps = arguments.steps(args.steps, model, ex)
+    h = arguments.finite(args.h, "--h") if args.h is not None and name != "h" else \
         ex.h * ex.n_steps / steps if ex.whole_trajectory else ex.h
+    output = args.output if args.output is not None else f"{model.name}_sweep.npz"
+    arguments.check_file(output, "--output", arguments.RESULT_SUFFIXES)
     module = compile_model(model, args.build_dir)
     print(f"model      {model.name} — {model.description}")
     print(f"sweep      {name} = {values[0]:g} … {values[-1]:g} ({len(values)} values, "
@@ -206,10 +226,9 @@ def _sweep(args) -> int:
     print(f"time       {time.perf_counter() - start:.2f} s")
     for line in result.format():
         print(line)
-    output = args.output or f"{model.name}_sweep.npz"
     result.save(output)
     print(f"output     {output}")
-    if args.plot:
+    if args.plot is not None:
         from .plots import plot_sweep
         plot_sweep(result, f"{model.name}: {result.succeeded.sum()} of {len(values)} "
                            f"succeeded", args.plot, log_x=args.spacing == "log")
@@ -217,68 +236,12 @@ def _sweep(args) -> int:
     return 0 if result.success else 1
 
 
-def _parameters(given: list[str] | None, model) -> dict[str, float]:
-    """``--param NAME=VALUE`` (repeated) as a mapping, each name a parameter of ``model``
-    and each value a finite number."""
-    out = {}
-    for item in given or ():
-        name, sep, text = item.partition("=")
-        if not sep or not name.strip():
-            raise ValueError(f"--param expects NAME=VALUE, got {item!r}")
-        name = _parameter_name(name, model)
-        out[name] = _finite(text, f"--param {name}")
-    return out
-
-
-def _parameter_name(name: str, model) -> str:
-    """``name`` (stripped), which must be a parameter of ``model``."""
-    name, known = name.strip(), [str(k) for k, _ in model.parameters]
-    if name not in known:
-        raise ValueError(f"--param {name}: model {model.name!r} has no parameter "
-                         f"{name!r}; its parameters: {known or 'none'}")
-    return name
-
-
-def _range(text: str, what: str) -> np.ndarray | None:
-    """``start:stop:count`` as ``count`` values from start to stop (linear spacing), or
-    None when ``text`` is one value (no colon)."""
-    if ":" not in text:
-        return None
-    parts = text.split(":")
-    if len(parts) != 3:
-        raise ValueError(f"{what}: expected start:stop:count, got {text!r}")
-    start, stop = (_finite(part, what) for part in parts[:2])
-    try:
-        count = int(parts[2])
-    except ValueError:
-        count = 0
-    if count < 2:
-        raise ValueError(f"{what}: the count of start:stop:count must be an integer ≥ 2, "
-                         f"got {parts[2]!r}")
-    return np.linspace(start, stop, count)
-
-
-def _geometric(values: np.ndarray, what: str) -> np.ndarray:
-    """The same count of values from the first to the last, geometrically spaced."""
-    if not (values[0] > 0 and values[-1] > 0):
-        raise ValueError(f"{what}: a logarithmic spacing needs positive end points, got "
-                         f"{values[0]:g} and {values[-1]:g}")
-    return np.geomspace(values[0], values[-1], len(values))
-
-
-def _check_plot_support() -> None:
-    """Refuse ``--plot`` before building and running when matplotlib is missing."""
-    if importlib.util.find_spec("matplotlib") is None:
-        from .plots import MISSING
-        raise ValueError(MISSING)
-
-
 def _check(args) -> int:
     from .checks import check
-    from .checks.runner import CHECKS
+    from .checks.runner import CHECKS, selected
     from .models import load_with_equations
-    only = [n.strip() for n in args.only.split(",") if n.strip()] if args.only else None
-    model, equations = load_with_equations(args.model)
+    only = None if args.only is None else selected(args.only, "--only")
+    model, equations = _load(args.model, load_with_equations)
     if args.json:
         report = check(model, only=only, equations=equations, budget=args.budget,
                        progress=_stderr)
@@ -295,11 +258,6 @@ def _check(args) -> int:
 
 def _stderr(line: str) -> None:
     print(line, file=sys.stderr, flush=True)
-
-
-def _budget(text: str) -> float | None:
-    """``--budget``'s value: positive seconds, or 'none' for no limit."""
-    return None if text.strip().lower() == "none" else _seconds(text)
 
 
 def _list(args) -> int:
@@ -328,30 +286,6 @@ def _warn_if_shadowed(spec: str, name: str) -> None:
                    f"integrate or solve_bvp); rename the file, e.g. to {name}_model.py")
 
 
-def _number(text: str) -> float:
-    """``text`` as a float, NaN where it is not a number."""
-    try:
-        return float(text)
-    except ValueError:
-        return math.nan
-
-
-def _finite(text: str, what: str) -> float:
-    """``text`` as a finite number, else a ValueError naming ``what``."""
-    value = _number(text)
-    if not math.isfinite(value):
-        raise ValueError(f"{what}: expected a finite number, got {text!r}")
-    return value
-
-
-def _seconds(text: str) -> float:
-    """``--timeout``'s value: a positive, finite number of seconds."""
-    value = _number(text)
-    if not (value > 0 and math.isfinite(value)):
-        raise argparse.ArgumentTypeError(f"expected a positive number of seconds, got {text!r}")
-    return value
-
-
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="symvi", description="Compiler for structure-preserving "
                                 "integrators on Lie groupoids.")
@@ -363,7 +297,7 @@ def parser() -> argparse.ArgumentParser:
     c.add_argument("--force", action="store_true", help="rebuild even if cached")
     c.add_argument("--verbose", action="store_true", help="show the compiler's output and "
                                                          "the time of each stage")
-    c.add_argument("--timeout", type=_seconds, default=None, metavar="SECONDS",
+    c.add_argument("--timeout", type=arguments.seconds, default=None, metavar="SECONDS",
                    help="give up (exit 1) if the build takes longer, naming the stage "
                         "that was running")
     c.add_argument("--quiet", action="store_true", help="no progress lines (a stage that "
@@ -404,7 +338,7 @@ def parser() -> argparse.ArgumentParser:
     k.add_argument("--only", default=None, help="comma-separated checks to run (default: "
                                                 "all)")
     k.add_argument("--json", action="store_true", help="print the report as JSON")
-    k.add_argument("--budget", type=_budget, default=DEFAULT_BUDGET, metavar="SECONDS",
+    k.add_argument("--budget", type=arguments.budget, default=DEFAULT_BUDGET, metavar="SECONDS",
                    help=f"each check's time budget (default {DEFAULT_BUDGET:g}; 'none': "
                         f"unlimited): past it the costly optional parts (the singular "
                         f"locus) are skipped with a note, never a verdict")
@@ -461,18 +395,14 @@ def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
     try:
         return args.func(args)
-    except ModelError as exc:
-        print(f"symvi: error: {exc}", file=sys.stderr)
-        return 2
-    except ValueError as exc:
-        print(f"symvi: error: {exc}", file=sys.stderr)
+    except (ValueError, MemoryError) as exc:
+        # bad input (a ModelError is a ValueError) or a request refused before allocating
+        # (with its estimate): one line in argparse's words, "symvi run: error: ..."
+        print(f"symvi {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except BuildError as exc:
         print(f"symvi: build failed: {exc}", file=sys.stderr)
         return 1
-    except MemoryError as exc:   # a request refused before allocating (with its estimate)
-        print(f"symvi: error: {exc}", file=sys.stderr)
-        return 2
     except OSError as exc:   # a file symvi did not expect to fail (the message names it)
         print(f"symvi: error: {exc}", file=sys.stderr)
         return 1

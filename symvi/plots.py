@@ -10,12 +10,18 @@ windows where a bound is active marked.
 from __future__ import annotations
 
 import os
+import secrets
 from typing import Any, Sequence
 
 import numpy as np
 
 #: Why ``--plot`` cannot run: the one message of the CLI's early check and of a late import.
 MISSING = "--plot needs matplotlib: pip install 'symvi[plots]'"
+#: Formats matplotlib lists but cannot write without more software: PGF measures its text
+#: with a LaTeX installation, found missing only when the figure is written.
+UNWRITABLE = ("pgf",)
+#: The formats named first where a message lists them.
+COMMON = (".png", ".pdf", ".svg")
 
 
 def plot_result(result: Any, model: Any, info: dict, file: str | os.PathLike) -> None:
@@ -32,8 +38,39 @@ def plot_result(result: Any, model: Any, info: dict, file: str | os.PathLike) ->
     _judge(axes[2], result, info)
     axes[-1].set_xlabel("t")
     fig.suptitle(f"{info['name']}: {result.status.name}")
-    fig.savefig(os.fspath(file), dpi=100)
-    plt.close(fig)
+    _save(plt, fig, file)
+
+
+def formats() -> tuple[str, ...]:
+    """The file suffixes a plot can be written to (``.png``, ``.pdf``, ``.svg``, then the
+    others alphabetically): what matplotlib's file-only Agg canvas writes;
+    :data:`MISSING` without matplotlib."""
+    _pyplot()
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    suffixes = {f".{name}" for name in FigureCanvasAgg.get_supported_filetypes()
+                if name not in UNWRITABLE}
+    return tuple(sorted(suffixes, key=lambda s: (COMMON.index(s) if s in COMMON
+                                                 else len(COMMON), s)))
+
+
+def _save(plt, fig, file: str | os.PathLike) -> None:
+    """Write ``fig`` to ``file`` in the format its suffix names (matplotlib's default,
+    PNG, without one; the name kept as given), as results are written: beside it, then
+    renamed over it — whole or not at all, and an existing symlink is replaced, never
+    written through. The figure is closed either way."""
+    target = os.path.abspath(os.fspath(file))
+    temporary = f"{target}.{os.getpid()}.{secrets.token_hex(4)}.tmp"
+    # the temporary's suffix is not the format's: name it
+    kind = os.path.splitext(target)[1][1:].lower() or plt.rcParams["savefig.format"]
+    try:
+        fig.savefig(temporary, format=kind, dpi=100)
+        os.replace(temporary, target)
+    except BaseException:
+        if os.path.exists(temporary):
+            os.unlink(temporary)
+        raise
+    finally:
+        plt.close(fig)
 
 
 def _pyplot():
@@ -124,5 +161,4 @@ def plot_sweep(sweep: Any, title: str, file: str | os.PathLike, log_x: bool = Fa
     ax.set_ylabel(sweep.measure_name)
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(loc="best", fontsize="small")
-    fig.savefig(os.fspath(file), dpi=100)
-    plt.close(fig)
+    _save(plt, fig, file)

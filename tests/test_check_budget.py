@@ -124,6 +124,6 @@ def test_cli_prints_each_check_and_what_the_budget_skipped(tmp_path, capsys):
 
 
 def test_default_budget_and_none():
-    from symvi.cli import _budget
+    from symvi.cli_arguments import budget
     assert budget_module.DEFAULT_BUDGET == 20.0
-    assert _budget("none") is None and _budget("2.5") == 2.5
+    assert budget("none") is None and budget("2.5") == 2.5

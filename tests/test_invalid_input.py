@@ -246,3 +246,63 @@ def test_ctrl_c_stops_a_long_integration_within_a_second(compiled, build_dir):
     assert "interrupted" in out, err
     print(f"\nCtrl-C latency: {latency * 1e3:.0f} ms")
     assert latency < 1.0
+
+
+# -- declarations refuse what run-time arguments refuse (issue 48, finding 6) ------------------
+@pytest.mark.parametrize("value", ["1.0", True, np.bool_(False), b"2", np.array("1.5")])
+def test_parameter_defaults_that_are_not_numbers_are_refused_in_the_run_times_words(value):
+    """A string or boolean default was silently converted (``"1.0"`` → 1.0, True → 1.0)
+    where ``integrate(..., params={"k": "1.0"})`` refuses it: the declaration now refuses
+    it with the run time's own message."""
+    from symvi._runtime.arguments import real
+    G, theta, omega = pendulum_symbols()
+    k = sp.Symbol("k", real=True)
+    with pytest.raises(ValueError) as runtime:
+        real(value, "parameter k")
+    with pytest.raises(ModelError) as declared:
+        Model("spring", G, lagrangian=omega**2 / 2 - k * theta**2 / 2, parameters={k: value})
+    assert str(declared.value) == str(runtime.value)
+    for number in (2, np.float64(2.0), sp.Rational(1, 2), sp.Float(0.5)):   # still numbers
+        model = Model("spring", G, lagrangian=omega**2 / 2 - k * theta**2 / 2,
+                      parameters={k: number})
+        assert model.parameter_defaults == (float(number),)
+
+
+@pytest.mark.parametrize("declare, message", [
+    (dict(time_cost="1"), "time_cost must be a real number or an expression in the "
+                          "parameters, got '1'"),
+    (dict(time_cost=True), "time_cost must be a real number or an expression in the "
+                           "parameters, got True"),
+    (dict(bounds={"tau1": ("-1", 1)}), "lower bound of control tau1 must be a real number "
+                                       "or an expression in the parameters, got '-1'"),
+])
+def test_time_cost_and_bounds_that_are_not_numbers_are_refused(declare, message):
+    """``time_cost="1"`` was parsed to ρ = 1 without a word."""
+    from symvi import SO3, optimal_control
+    G = SO3()
+    u = sp.symbols("tau1 tau2 tau3", real=True)
+    Omega = sp.Matrix(G.xi)
+    with pytest.raises(ModelError) as info:
+        optimal_control("bad", G, (Omega.T * Omega)[0] / 2, sum(v**2 for v in u) / 2, u,
+                        **declare)
+    assert str(info.value) == message
+
+
+def test_derivative_takes_sympy_and_numpy_integers_and_refuses_other_types():
+    """``G.derivative(sp.Integer(3))`` was refused with "derivative(3): … go from 0 to 5",
+    contradicting itself; SymPy and NumPy integers are integers, a bool or a float is
+    refused as such, and a range error names the range."""
+    from symvi import SO3
+    G, S = PairGroupoid(["x", "y"]), SO3()
+    assert G.derivative(sp.Integer(3)) == G.derivative(3) == G.derivative(np.int64(3))
+    assert S.derivative(sp.Integer(3)) == S.derivative(np.int32(3)) == S.derivative(3)
+    assert G.derivative(sp.Integer(1)) == G.qdot and S.derivative(np.int8(0)) == S.xi
+    for bad, kind in [(True, "bool"), (np.bool_(True), "bool"), (3.0, "float"),
+                      (sp.Float(3), "Float"), (sp.Rational(3, 2), "Rational"), ("3", "str"),
+                      (None, "NoneType")]:
+        with pytest.raises(ModelError, match=f"must be an integer, got {kind}$"):
+            G.derivative(bad)
+    with pytest.raises(ModelError, match=r"^derivative\(6\): .* go from 0 to 5"):
+        S.derivative(sp.Integer(6))
+    with pytest.raises(ModelError, match=r"^derivative\(-1\): .* go from 0 to 6"):
+        G.derivative(np.int64(-1))

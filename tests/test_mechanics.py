@@ -193,3 +193,27 @@ def test_actuators_are_refused_like_loads():
                                         system.bodies[1], ground))
     with pytest.raises(ModelError, match="not a force"):
         from_system(system, name="bad", parameters={"m": 1.0, "l": 2.0, "g": 9.81})
+
+
+def test_arguments_that_are_not_a_lagrangian_or_a_system_are_refused_by_name():
+    """``from_lagrangian(None, ...)`` raised ``AttributeError: 'NoneType' object has no
+    attribute 'xreplace'``; each argument of the wrong kind is refused by its name."""
+    system, theta, _ = pendulum_system()
+    rate = theta.diff() ** 2 / 2
+    for call, message in [
+            (lambda: from_lagrangian(None, [theta], name="bad", parameters={}),
+             "bad: lagrangian must be a SymPy expression in the coordinates q(t) and their "
+             "rates, got NoneType"),
+            (lambda: from_lagrangian(rate, None, name="bad", parameters={}),
+             "bad: coordinates must be a list of dynamicsymbols q(t), got None"),
+            (lambda: from_lagrangian(rate, theta, name="bad", parameters={}),
+             "bad: coordinates must be a list of dynamicsymbols q(t), got theta(t)"),
+            (lambda: from_lagrangian(rate, [theta], name="bad", parameters=None),
+             "bad: parameters must be a mapping symbol or name → default value, got "
+             "NoneType"),
+            (lambda: from_system(None, name="bad", parameters={}),
+             "bad: system must be a sympy.physics.mechanics.System, got NoneType")]:
+        with pytest.raises(ModelError) as info:
+            call()
+        assert str(info.value) == message
+    assert from_lagrangian(rate, (theta,), name="free", parameters={}).order == 1

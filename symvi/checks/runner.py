@@ -95,23 +95,37 @@ def run_check(name: str, ctx: Context) -> CheckResult:
     return result
 
 
-def check(model: Model, *, only: Sequence[str] | None = None, equations: Sequence = (),
+def selected(only: str | Sequence[str] | None, what: str = "only") -> list[str]:
+    """The checks to run, each once, in the order given: all of :data:`CHECKS` for None,
+    else the names in ``only`` — a sequence, or text separated by commas as ``symvi check
+    --only`` takes it. No name at all (``",,"``) or a name that is not a check is a
+    ValueError naming ``what`` and listing the checks: running none is no verdict."""
+    if only is None:
+        return list(CHECKS)
+    names = only.split(",") if isinstance(only, str) else list(only)
+    names = list(dict.fromkeys(str(n).strip() for n in names if str(n).strip()))
+    if not names:
+        raise ValueError(f"{what} names no check, got {only!r}; checks: {', '.join(CHECKS)}")
+    unknown = [n for n in names if n not in CHECKS]
+    if unknown:
+        raise ValueError(f"{what}: unknown check(s) {unknown}; checks: {', '.join(CHECKS)}")
+    return names
+
+
+def check(model: Model, *, only: str | Sequence[str] | None = None, equations: Sequence = (),
           seed: int = 20261121, budget: float | None = DEFAULT_BUDGET,
           on_result: Callable[[CheckResult], None] | None = None,
           progress: Callable[[str], None] | None = None) -> CheckReport:
     """Run the derivation checks on ``model`` and return their :class:`CheckReport`.
 
-    ``only`` restricts the run to some of :data:`CHECKS`; ``equations`` are hand-derived
+    ``only`` restricts the run to some of :data:`CHECKS` (:func:`selected`); ``equations`` are hand-derived
     equations for the ``equations`` check (:class:`symvi.checks.equations.HandDerived`).
     ``budget`` is each check's time in seconds (None: unlimited) past which its optional,
     costly parts (the singular locus) are skipped with a note, never its verdict.
     ``on_result`` receives each check's result as it finishes; ``progress`` a line when
     a check has run for :data:`SLOW_CHECK` seconds and when it ends.
     """
-    names = list(CHECKS) if only is None else list(only)
-    unknown = [n for n in names if n not in CHECKS]
-    if unknown:
-        raise ValueError(f"unknown check(s) {unknown}; checks: {', '.join(CHECKS)}")
+    names = selected(only)
     ctx = Context(model, equations, seed, Budget(budget))
     results = []
     for name in names:

@@ -15,7 +15,7 @@ from typing import Any, Mapping, Sequence
 import sympy as sp
 
 from ..errors import ModelError
-from .validation import scalar
+from .validation import NOT_NUMBERS, scalar
 
 Interval = tuple[sp.Expr | None, sp.Expr | None]
 
@@ -24,7 +24,11 @@ def parameter_expression(value, what: str, defaults: Mapping[sp.Symbol, float],
                          hint: str = "") -> sp.Expr:
     """``value`` as a scalar expression in the parameters (``defaults``: symbol → default
     value), finite at their defaults; a :class:`ModelError` naming ``what`` (with
-    ``hint`` when infinite) otherwise."""
+    ``hint`` when infinite) otherwise. A string or a boolean is refused, as the run time
+    refuses them for numbers (``time_cost="1"`` would otherwise be parsed to 1)."""
+    if isinstance(value, NOT_NUMBERS):
+        raise ModelError(f"{what} must be a real number or an expression in the "
+                         f"parameters, got {value!r}")
     expr = scalar(value, what)
     unknown = expr.free_symbols - set(defaults)
     if unknown:

@@ -33,7 +33,10 @@ def from_system(system, *, name: str, parameters: Mapping[Any, float],
     coordinates (masses, lengths, g), by Symbol or name; ``options`` go to :class:`Model`
     (``example``, ``description``, ``discretisation``, ``symmetries``).
     """
-    from sympy.physics.mechanics import dynamicsymbols
+    from sympy.physics.mechanics import System, dynamicsymbols
+    if not isinstance(system, System):
+        raise ModelError(f"{name}: system must be a sympy.physics.mechanics.System, got "
+                         f"{type(system).__name__}")
     coordinates = list(system.q)
     if not coordinates:
         raise ModelError(f"{name}: the system has no generalised coordinates")
@@ -57,6 +60,8 @@ def from_lagrangian(lagrangian, coordinates: Sequence, *, name: str,
     ``dynamicsymbols`` ``coordinates``; see :func:`from_system`."""
     from sympy.physics.mechanics import dynamicsymbols
     t = dynamicsymbols._t
+    lagrangian, coordinates = _lagrangian(lagrangian, name), _sequence(coordinates, name)
+    parameters = _mapping(parameters, name)
     names = []
     for q in coordinates:
         if not (isinstance(q, sp.Function) and q.args == (t,)):
@@ -64,7 +69,7 @@ def from_lagrangian(lagrangian, coordinates: Sequence, *, name: str,
         names.append(str(q.func))
     G = PairGroupoid(names)
     rates = {q.diff(t): v for q, v in zip(coordinates, G.qdot)}
-    L = sp.sympify(lagrangian).xreplace(rates).xreplace(dict(zip(coordinates, G.q)))
+    L = lagrangian.xreplace(rates).xreplace(dict(zip(coordinates, G.q)))
     left = L.atoms(sp.Derivative) | {f for f in L.atoms(sp.Function) if t in f.free_symbols}
     if left:
         raise ModelError(f"{name}: the Lagrangian still holds {sorted(map(str, left))} after "
@@ -83,6 +88,36 @@ def from_lagrangian(lagrangian, coordinates: Sequence, *, name: str,
                          + (f"; not in the Lagrangian: {', '.join(unused)}" if unused else ""))
     return Model(name=name, groupoid=G, lagrangian=L,
                  parameters={symbols[n]: given[n] for n in sorted(symbols)}, **options)
+
+
+def _lagrangian(value: Any, name: str) -> sp.Expr:
+    """``from_lagrangian``'s ``lagrangian`` as a SymPy expression (text is parsed, as
+    :class:`Model` parses it); anything else, None included, is refused by the
+    argument's name."""
+    try:
+        L = sp.sympify(value)
+    except (sp.SympifyError, TypeError):
+        L = None
+    if not isinstance(L, sp.Expr):
+        raise ModelError(f"{name}: lagrangian must be a SymPy expression in the coordinates "
+                         f"q(t) and their rates, got {type(value).__name__}")
+    return L
+
+
+def _sequence(value: Any, name: str) -> list:
+    """``from_lagrangian``'s ``coordinates``: a list or tuple of dynamicsymbols."""
+    if not isinstance(value, (list, tuple, sp.MatrixBase)):
+        raise ModelError(f"{name}: coordinates must be a list of dynamicsymbols q(t), got "
+                         f"{value!r}")
+    return list(value)
+
+
+def _mapping(value: Any, name: str) -> Mapping:
+    """``parameters``: a mapping from each parameter (Symbol or name) to its default."""
+    if not isinstance(value, Mapping):
+        raise ModelError(f"{name}: parameters must be a mapping symbol or name → default "
+                         f"value, got {type(value).__name__}")
+    return value
 
 
 def _check_unconstrained(system, name: str) -> None:

@@ -23,7 +23,7 @@ from ..discretisation.rules import MAX_ORDER
 from ..groupoids.base import Groupoid, step_matrix
 from .rank import generic_rank
 from .symmetry import Symmetry
-from .validation import check_model_name, check_smooth, scalar
+from .validation import NOT_NUMBERS, check_model_name, check_smooth, scalar
 
 @dataclass(frozen=True)
 class Example:
@@ -70,16 +70,27 @@ class Example:
         return self.start is not None
 
 
+def _default(symbol: sp.Symbol, value: Any) -> float:
+    """The default ``value`` of parameter ``symbol`` as a float: a real number (Python,
+    NumPy or SymPy, e.g. ``sp.Rational(1, 2)``); strings and booleans are refused in the
+    run time's words (``parameter m must be a real number, got '1.0'``)."""
+    if isinstance(value, np.ndarray) and value.ndim == 0:    # np.array("1.0") is a string
+        value = value[()]
+    if isinstance(value, NOT_NUMBERS):
+        raise ModelError(f"parameter {symbol} must be a real number, got {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise ModelError(f"parameter {symbol} has a non-numeric default {value!r}") from None
+
+
 def _sympify_parameters(parameters: Mapping[Any, float]) -> tuple[tuple[sp.Symbol, float], ...]:
     items = []
     for key, value in parameters.items():
         symbol = sp.Symbol(key, real=True) if isinstance(key, str) else key
         if not isinstance(symbol, sp.Symbol):
             raise ModelError(f"parameter {key!r} must be a SymPy Symbol or a name")
-        try:
-            default = float(value)
-        except (TypeError, ValueError):
-            raise ModelError(f"parameter {symbol} has a non-numeric default {value!r}") from None
+        default = _default(symbol, value)
         if not math.isfinite(default):
             raise ModelError(f"parameter {symbol} has a non-finite default {default}")
         declared = sign(symbol)

@@ -18,6 +18,7 @@ built from these by :mod:`symvi.derivation.derive`, so a new groupoid is a new s
 """
 from __future__ import annotations
 
+import operator
 from abc import ABC, abstractmethod
 from dataclasses import dataclass
 from typing import Sequence
@@ -35,12 +36,23 @@ def derivative_name(name: str, k: int) -> str:
     return name + (("", "_dot", "_ddot", "_dddot")[k] if k < 4 else f"_d{k}")
 
 
-def _check_derivative(j, highest: int) -> None:
-    """Refuse a derivative index other than an integer 0 … ``highest`` (Lagrangians go up
-    to order :data:`symvi.discretisation.rules.MAX_ORDER`)."""
-    if isinstance(j, bool) or not isinstance(j, (int, np.integer)) or not 0 <= j <= highest:
-        raise ModelError(f"derivative({j!r}): the derivatives of a Lagrangian's symbols go "
+def _check_derivative(j, highest: int) -> int:
+    """``j`` as an int in 0 … ``highest`` (Lagrangians go up to order
+    :data:`symvi.discretisation.rules.MAX_ORDER`). Python, NumPy and SymPy integers are
+    integers; booleans, floats (even 3.0) and anything else are refused."""
+    # operator.index is the integer protocol int, np.int64 and sp.Integer share; a float
+    # has no __index__, a bool has one but means a flag, not an order
+    try:
+        index = None if isinstance(j, (bool, np.bool_)) else operator.index(j)
+    except TypeError:
+        index = None
+    if index is None:
+        raise ModelError(f"derivative({j!r}): the order of the derivative must be an "
+                         f"integer, got {type(j).__name__}")
+    if not 0 <= index <= highest:
+        raise ModelError(f"derivative({index}): the derivatives of a Lagrangian's symbols go "
                          f"from 0 to {highest} (Lagrangians up to order 6)")
+    return index
 
 
 def subscript(number: int) -> str:

@@ -257,7 +257,7 @@ class MatrixLieGroup(Groupoid):
     def derivative(self, j: int) -> tuple[sp.Symbol, ...]:
         """The symbols of ξ⁽ʲ⁾: ``xi``, ``xidot``, then ``<name>_ddot``, ``<name>_dddot``,
         ``<name>_d4``, … (:func:`derivative_name`)."""
-        _check_derivative(j, MAX_ORDER - 1)
+        j = _check_derivative(j, MAX_ORDER - 1)
         if j < 2:
             return (self.xi, self.xidot)[j]
         return tuple(sp.Symbol(derivative_name(n, j), real=True) for n in self.names)

@@ -79,7 +79,7 @@ class PairGroupoid(Groupoid):
     def derivative(self, j: int) -> tuple[sp.Symbol, ...]:
         """The symbols of q⁽ʲ⁾: ``q``, ``qdot``, ``qddot``, then ``<name>_dddot``,
         ``<name>_d4``, … (:func:`derivative_name`)."""
-        _check_derivative(j, MAX_ORDER)
+        j = _check_derivative(j, MAX_ORDER)
         known = (self.q, self.qdot, self.qddot)
         if j < len(known):
             return known[j]
