@@ -197,10 +197,18 @@ def test_infeasible_bounds_are_reported_not_solved(slew):
     def eq(v):
         return prob.constraints(v[..., :-1])
 
+    constraints = [dict(type="eq", fun=eq, jac=lambda v: cs_derivative(eq, v)),
+                   dict(type="ineq", fun=ineq, jac=lambda v: cs_derivative(ineq, v))]
     res = minimize(lambda v: v[-1], np.r_[start, 5.0], jac=lambda v: np.eye(v.size)[-1],
-                   method="SLSQP", options=dict(maxiter=500, ftol=1e-12), constraints=[
-                       dict(type="eq", fun=eq, jac=lambda v: cs_derivative(eq, v)),
-                       dict(type="ineq", fun=ineq, jac=lambda v: cs_derivative(ineq, v))])
+                   method="SLSQP", options=dict(maxiter=500, ftol=1e-12),
+                   constraints=constraints)
+    if not res.success:
+        # SLSQP's line search can stall at the minimum in the last digits, depending on
+        # the BLAS kernels' rounding (OpenBLAS's Haswell kernels: status 8 at 0.4876);
+        # restarted there it converges and certifies the point
+        res = minimize(lambda v: v[-1], res.x, jac=lambda v: np.eye(v.size)[-1],
+                       method="SLSQP", options=dict(maxiter=500, ftol=1e-12),
+                       constraints=constraints)
     print(f"\nsmallest largest violation of |τ| ≤ 8.5: {res.x[-1]:.4f} ({res.message}); "
           f"symvi's penalised minimiser: {stayed[-1]:.4f}")
     assert res.success and res.x[-1] > 0.4 and stayed[-1] >= res.x[-1] - 1e-6
