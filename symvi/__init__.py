@@ -12,13 +12,14 @@ from .groupoids import (SE2, SE3, SO3, ActionGroupoid, Groupoid, MatrixLieGroup,
                         PairGroupoid, ProductGroupoid)
 from .declaration.model import Example, Model, h  # noqa: E402
 from ._runtime.results import State  # noqa: E402
+from ._runtime.options import SolveOptions, StepOptions  # noqa: E402
 from .declaration.symmetry import Symmetry  # noqa: E402
 from .declaration.control import euler_lagrange_operator, optimal_control  # noqa: E402
 from .declaration.nonholonomic import distribution, nonholonomic_control  # noqa: E402
 from .build import compile_model, load  # noqa: E402
 
 
-__all__ = ["Model", "Example", "State", "Symmetry", "optimal_control", "euler_lagrange_operator",
+__all__ = ["Model", "Example", "State", "SolveOptions", "StepOptions", "Symmetry", "optimal_control", "euler_lagrange_operator",
            "distribution", "nonholonomic_control", "PairGroupoid", "MatrixLieGroup",
            "ActionGroupoid",
            "ProductGroupoid", "SO3", "SE2", "SE3",

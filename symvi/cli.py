@@ -81,6 +81,7 @@ def _run(args) -> int:
     ex = _example(model)
     params = arguments.parameters(args.param, model)
     steps = arguments.steps(args.steps, model, ex)
+    options = arguments.solver_options(args, ex.whole_trajectory)
     start = time.perf_counter()
     module = compile_model(model, args.build_dir)
     built = time.perf_counter() - start
@@ -91,7 +92,9 @@ def _run(args) -> int:
     print(f"build      {built:.2f} s ({Path(args.build_dir) / model.name})")
     if params:
         print(f"params     {', '.join(f'{k} = {v:g}' for k, v in params.items())}")
-    result = (_solve if ex.whole_trajectory else _integrate)(module, ex, steps, h, params, args)
+    _print_options(options)
+    result = (_solve if ex.whole_trajectory else _integrate)(module, ex, steps, h, params,
+                                                             args, options)
     _outputs(result, model, module, args)
     return 0 if result.success else 1
 
@@ -128,10 +131,19 @@ def _example(model):
     return model.example
 
 
-def _integrate(module, ex, steps: int, h: float, params: dict, args):
-    """The step-by-step example: integrate and summarise."""
+def _print_options(options: dict) -> None:
+    """The solver's options given on the command line, if any."""
+    if options:
+        given = (name if value is True else f"{name} = {value:g}"
+                 for name, value in options.items())
+        print(f"options    {', '.join(given)}")
+
+
+def _integrate(module, ex, steps: int, h: float, params: dict, args, options: dict):
+    """The step-by-step example: integrate (the step map's ``options``) and summarise."""
     start = time.perf_counter()
-    result = module.integrate(ex.run_from, steps, h, params, keep_every=args.keep_every)
+    result = module.integrate(ex.run_from, steps, h, params, keep_every=args.keep_every,
+                              **options)
     elapsed = time.perf_counter() - start
     if ex.state is not None:
         print(f"start      the state v = {np.array2string(np.asarray(ex.state.v, float))}"
@@ -153,14 +165,15 @@ def _integrate(module, ex, steps: int, h: float, params: dict, args):
     return result
 
 
-def _solve(module, ex, steps: int, h: float, params: dict, args):
-    """The whole-trajectory example (optimal control): solve and summarise. SciPy, which
-    the solve imports on first use, is imported before the clock starts."""
+def _solve(module, ex, steps: int, h: float, params: dict, args, options: dict):
+    """The whole-trajectory example (optimal control): solve (under ``options``) and
+    summarise. SciPy, which the solve imports on first use, is imported before the clock
+    starts."""
     for name in ("scipy.linalg", "scipy.sparse.linalg"):
         importlib.import_module(name)
     start = time.perf_counter()
     result = module.solve_bvp(ex.start, ex.end, steps, h, params,
-                              guess=ex.guess_nodes(steps, module.model.order))
+                              guess=ex.guess_nodes(steps, module.model.order), **options)
     elapsed = time.perf_counter() - start
     free = module.model.info.get("free_horizon")
     # a free horizon's T and h are the solve's, not the guess passed in
@@ -208,6 +221,7 @@ def _sweep(args) -> int:
     ex = _example(model)
     name, values, params = arguments.swept(args, model, ex)
     steps = arguments.steps(args.steps, model, ex)
+    options = arguments.solver_options(args, ex.whole_trajectory)
     h = arguments.finite(args.h, "--h") if args.h is not None and name != "h" else \
         ex.h * ex.n_steps / steps if ex.whole_trajectory else ex.h
     output = args.output if args.output is not None else f"{model.name}_sweep.npz"
@@ -219,10 +233,11 @@ def _sweep(args) -> int:
     if name == "h" and ex.state is None:
         print("note       the example starts from nodes: its initial velocity (q₁ − q₀)/h "
               "changes with h")
+    _print_options(options)
     start = time.perf_counter()
     result = run_sweep(module, ex, name, values, steps=steps, h=h, params=params,
                        workers=args.workers, keep_every=args.keep_every,
-                       progress=False if args.quiet else None)
+                       progress=False if args.quiet else None, options=options)
     print(f"time       {time.perf_counter() - start:.2f} s")
     for line in result.format():
         print(line)
@@ -328,6 +343,7 @@ def parser() -> argparse.ArgumentParser:
     r.add_argument("--plot", default=None, metavar="FILE.png",
                    help="write a plot of the result: configuration, velocities, and the "
                         "energy error or the controls (needs matplotlib)")
+    arguments.add_option_flags(r)
     r.set_defaults(func=_run)
     _sweep_parser(sub)
     k = sub.add_parser("check", help="run the derivation checks on MODEL (exit 0: all "
@@ -388,6 +404,7 @@ def _sweep_parser(sub) -> None:
                    help="write the summary plot: the judgement against the swept values "
                         "(needs matplotlib)")
     w.add_argument("--quiet", action="store_true", help="no progress bar")
+    arguments.add_option_flags(w)
     w.set_defaults(func=_sweep)
 
 

@@ -1,28 +1,108 @@
 """The command line's arguments, checked before any work: the numbers (steps, the step h,
-the workers), the files a command writes (their folder, their suffix, never a directory),
-the checks to run, and the parameters against their declared signs — so that a bad one
-costs no build and no finished run is lost to a name that cannot be written."""
+the workers), the solvers' options (``--xtol``, ``--maxiter``, ``--verbose``, …), the
+files a command writes (their folder, their suffix, never a directory), the checks to
+run, and the parameters against their declared signs — so that a bad one costs no build
+and no finished run is lost to a name that cannot be written."""
 from __future__ import annotations
 
 import argparse
 import importlib.util
 import math
 import os
+from dataclasses import Field, fields
 from pathlib import Path
 from typing import Sequence
 
 import numpy as np
 
-from ._runtime.arguments import SIGNS
+from ._runtime.signs import SIGNS
+from ._runtime.options import SolveOptions, StepOptions
 from .declaration.symbols import sign
 
 #: What ``--output`` writes: a NumPy archive (``save``), whatever the name's suffix.
 RESULT_SUFFIXES = (".npz",)
 
 
+#: The options classes whose numbers and switches ``symvi run`` and ``symvi sweep`` take
+#: as flags: the step map's and the whole trajectory's.
+SOLVERS = (StepOptions, SolveOptions)
+#: What the help calls each.
+SOLVER_NAMES = {StepOptions: "for the step map", SolveOptions: "for the whole-trajectory solve"}
+#: The field types a flag can give (sequences are for the Python calls).
+FLAG_TYPES = {"int": int, "float": float, "bool": bool}
+
+
+def option_fields() -> dict[str, tuple[Field, tuple[type, ...]]]:
+    """Each option that can be a flag: name → (its field, the options classes that have
+    it), in declaration order."""
+    out: dict[str, tuple[Field, tuple[type, ...]]] = {}
+    for solver in SOLVERS:
+        for f in fields(solver):
+            if f.type in FLAG_TYPES:
+                field, owners = out.get(f.name, (f, ()))
+                out[f.name] = (field, owners + (solver,))
+    return out
+
+
+def flag_of(name: str) -> str:
+    """The flag of option ``name``: ``--kappa-epsilon``."""
+    return "--" + name.replace("_", "-")
+
+
+def add_option_flags(parser) -> None:
+    """A flag for every option of :func:`option_fields`, its help the option's own
+    description (``_runtime/options.py``): a new option needs no edit here."""
+    group = parser.add_argument_group(
+        "solver options", "Newton's options, of the step map (integrate) or of the whole-"
+        "trajectory solve (optimal control); default: the solver's")
+    for name, (field, owners) in option_fields().items():
+        defaults = ", ".join(f"{next(f.default for f in fields(solver) if f.name == name)!r}"
+                             f" {SOLVER_NAMES[solver]}" for solver in owners)
+        only = "" if len(owners) == len(SOLVERS) else \
+            f"; {SOLVER_NAMES[owners[0]]} only"
+        text = f"{field.metadata['doc']}{only} (default {defaults})".replace("%", "%%")
+        if FLAG_TYPES[field.type] is bool:
+            group.add_argument(flag_of(name), dest=name, action="store_const", const=True,
+                               default=None, help=text)
+        else:
+            group.add_argument(flag_of(name), dest=name, type=FLAG_TYPES[field.type],
+                               default=None, metavar=name.upper(), help=text)
+
+
+def check_option_flags(args) -> None:
+    """The options given as flags, each checked by its own option's check, in the flag's
+    words (``--xtol must be finite and non-negative, got -1``)."""
+    for name, (field, _) in option_fields().items():
+        value = getattr(args, name)
+        if value is not None:
+            try:
+                field.metadata["check"](value, flag_of(name))
+            except TypeError as exc:
+                raise ValueError(str(exc)) from None
+
+
+def solver_options(args, whole_trajectory: bool) -> dict:
+    """The options given as flags, by name, for the example's solver (the whole-trajectory
+    solve's or the step map's); a flag of the other solver only is refused, naming it."""
+    solver, given = SolveOptions if whole_trajectory else StepOptions, {}
+    for name, (_, owners) in option_fields().items():
+        value = getattr(args, name)
+        if value is None:
+            continue
+        if solver not in owners:
+            other = "the step map" if whole_trajectory else "the whole-trajectory solve"
+            this = "solves a whole trajectory" if whole_trajectory else \
+                "integrates step by step"
+            raise ValueError(f"{flag_of(name)} is an option of {other} only; this "
+                             f"example {this}")
+        given[name] = value
+    return given
+
+
 def check_run_arguments(args) -> None:
-    """``symvi run``'s numbers and files, refused before the model is even loaded: a run
-    that ends in a bad name or a missing folder loses its work."""
+    """``symvi run``'s numbers, options and files, refused before the model is even
+    loaded: a run that ends in a bad name or a missing folder loses its work."""
+    check_option_flags(args)
     check_count(args.steps, "--steps")
     check_count(args.keep_every, "--keep-every")
     if args.h is not None:
@@ -33,8 +113,9 @@ def check_run_arguments(args) -> None:
 
 
 def check_sweep_arguments(args) -> None:
-    """``symvi sweep``'s numbers and files that need no model (the default ``--output``
-    is named after it, and checked once it is loaded)."""
+    """``symvi sweep``'s numbers, options and files that need no model (the default
+    ``--output`` is named after it, and checked once it is loaded)."""
+    check_option_flags(args)
     check_count(args.steps, "--steps")
     check_count(args.keep_every, "--keep-every")
     check_count(args.workers, "--workers")

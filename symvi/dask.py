@@ -54,6 +54,7 @@ def integrate_many(client, package: ModuleType, initial, n_steps: int, h,
     options = {"workers": 1} | options
     batch = batch_arguments.trajectories(**_arguments(
         _local_integrate_many, package.model, initial, n_steps, h, params, **options))
+    options = _plain_options(options, batch.options)
     chunk = _chunk(chunk)
     with Progress(batch.size, "trajectories", progress) as bar:
         futures = [client.submit(_run_fields, folder, "integrate_many",
@@ -73,6 +74,7 @@ def solve_bvp_many(client, package: ModuleType, starts, ends, n_steps: int, h=No
     folder = _folder(package)
     batch = batch_arguments.solves(**_arguments(
         _local_solve_bvp_many, package.model, starts, ends, n_steps, h, params, **options))
+    options = _plain_options(options, batch.options)
     chunk = _chunk(chunk)
     with Progress(batch.size, "solves", progress) as bar:
         futures = [client.submit(_run, folder, "solve_bvp_many",
@@ -93,6 +95,16 @@ def _arguments(local: Callable, model, *args, **options) -> dict:
     bound.apply_defaults()
     bound.arguments.pop("progress")
     return dict(bound.arguments)
+
+
+def _plain_options(options: dict, checked) -> dict:
+    """``options`` with the solver's options (given as ``options=`` or as keywords) as one
+    mapping of the ``checked`` object's fields: every package carries its own options
+    classes (``_runtime/options.py``), which a worker that has imported no package
+    cannot unpickle."""
+    names = set(checked.names())
+    return {k: v for k, v in options.items() if k != "options" and k not in names} | \
+        {"options": {f.name: getattr(checked, f.name) for f in fields(checked)}}
 
 
 def _chunk(chunk) -> int:

@@ -98,9 +98,15 @@ def _configuration(ax, result, info: dict, names: Sequence[str]) -> None:
 
 def _velocities(ax, result, info: dict, names: Sequence[str]) -> None:
     h = float(result.t[1] - result.t[0])
-    # nodes as data (a pair groupoid): the element is the next node, the velocity its
-    # difference quotient; otherwise the fibres are the velocities (ξ on a group)
-    values = np.diff(result.x, axis=0) / h if info["node_pairs"] else result.f
+    # per fibre coordinate (INFO["fibre_nodes"]): a copy of the next node's coordinate j
+    # (a pair factor) has the difference quotient of x_j as its velocity, an increment (ξ
+    # on a group) is the velocity itself
+    nodes = np.asarray(info["fibre_nodes"], dtype=int)
+    copies = nodes >= 0
+    values = np.array(result.f, dtype=float, copy=True)
+    if copies.any():
+        x = np.asarray(result.x, dtype=float)[:len(values) + 1, nodes[copies]]
+        values[:, copies] = (x[1:] - x[:-1]) / h
     _lines(ax, result.t[:len(values)] + h / 2, values, names, "velocity")
 
 

@@ -89,11 +89,13 @@ class Sweep:
 
 def run_sweep(module, example, name: str, values: np.ndarray, *, steps: int, h: float,
               params: dict, workers: int | None = None, keep_every: int = 1,
-              progress: bool | None = None) -> Sweep:
+              progress: bool | None = None, options: dict | None = None) -> Sweep:
     """Run ``example`` (the model's :class:`symvi.Example`) of the generated package
     ``module`` once per value of ``name`` (a parameter, or ``"h"``), the other
     parameters ``params``, ``steps`` steps of ``h`` (an optimal-control example: N =
-    ``steps``, horizon ``steps·h``)."""
+    ``steps``, horizon ``steps·h``), the solver's ``options`` by name (``xtol``,
+    ``maxiter``, …: the continuation's or the step map's)."""
+    options = dict(options or {})
     B = len(values)
     if example.whole_trajectory:
         if name == "h":
@@ -101,12 +103,14 @@ def run_sweep(module, example, name: str, values: np.ndarray, *, steps: int, h: 
                              "whole trajectory follows from --steps and its horizon")
         batch = module.continuation(example.start, example.end, steps, h,
                                     {name: values}, params=params, progress=progress,
-                                    guess=example.guess_nodes(steps, module.model.order))
+                                    guess=example.guess_nodes(steps, module.model.order),
+                                    **options)
         return Sweep(name, values, batch, batch.cost, "cost")
     step = values if name == "h" else h
     overrides = dict(params) | ({} if name == "h" else {name: values})
     batch = module.integrate_many(_replicate(example.run_from, B), steps, step, overrides,
-                                  workers=workers, keep_every=keep_every, progress=progress)
+                                  workers=workers, keep_every=keep_every, progress=progress,
+                                  **options)
     measure, measure_name = _judge(batch)
     return Sweep(name, values, batch, measure, measure_name)
 

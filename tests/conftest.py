@@ -42,9 +42,9 @@ COSTLIEST = ("se3_body_exp", "se3_body", "heavy_top_exp", "heavy_top",
              "heavy_top_rotors_oc_variational", "double_pendulum_oc", "heavy_top_rotors_oc",
              "spherical_pendulum_exp", "spherical_pendulum", "heavy_top_rotors_oc_exp")
 
-# Every derivation of the session stays in the process's memo (the library keeps the last
+# Every derivation of the session stays in the process's cache (the library keeps the last
 # 32): the checks, the kernels-versus-SymPy tests and the builds share them.
-symvi.derivation.derive.MEMO_SIZE = 1024
+symvi.derivation.derive.PROCESS_CACHE.size = 1024
 
 
 def _worker() -> tuple[int, int]:

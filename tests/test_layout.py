@@ -43,13 +43,96 @@ def _imports_at_load(name: str, path: Path, modules: dict[str, Path]) -> set[str
     return found & modules.keys()
 
 
+#: A test of a groupoid's kind: ``kind ==``, ``kind in``, ``kind !=``, ``info["kind"] ==``
+#: (Python), ``F.kind == …``, ``selectattr("kind", "equalto", …)`` (Jinja), and a lookup
+#: by kind, ``TABLE[g.kind]``. Reading it for a message or the metadata is no branch.
+KIND_BRANCH = re.compile(r"""\bkind\b["']?\]?\s*(==|!=|in\b)|["']kind["']\s*,\s*["']equalto"""
+                         r"""|\[\s*[\w.]+\.kind\s*\]|\[\s*\w+\[["']kind["']\]\s*\]""")
+#: A test of a retraction's name: ``.name == "cayley"``, ``retraction == "exp"``,
+#: ``"cayley" in …``, a Jinja ``equalto``/``rejectattr`` on ``retraction``.
+RETRACTION_NAMES = r"""["'](?:cayley|exp)["']"""
+RETRACTION_BRANCH = re.compile(
+    rf"""(==|!=)\s*{RETRACTION_NAMES}|{RETRACTION_NAMES}\s*(==|!=|in\b)"""
+    rf"""|["']retraction["']\s*,\s*["']equalto|retraction\s*(==|!=)""")
+
+
+def _lines(paths, skip=lambda path: False):
+    for path in paths:
+        if skip(path):
+            continue
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            yield f"{path.relative_to(ROOT)}:{number}: {line.strip()}", line
+
+
+def _sources():
+    """symvi/ (the run time included) and templates/."""
+    return [*sorted(SYMVI.rglob("*.py")), *sorted((ROOT / "templates").glob("*.j2"))]
+
+
 def test_no_kind_branches_outside_the_groupoids():
-    branch = re.compile(r"\bkind\s*(==|in\b)")
-    offending = [f"{path.relative_to(ROOT)}:{number}: {line.strip()}"
-                 for path in SYMVI.rglob("*.py") if "groupoids" not in path.parts
-                 for number, line in enumerate(path.read_text().splitlines(), 1)
-                 if branch.search(line)]
+    """Outside symvi/groupoids/ nothing tests a groupoid's kind (symvi/, the run time,
+    the templates): what differs between kinds is data or methods the groupoid gives."""
+    offending = [where for where, line in _lines(_sources(),
+                                                 skip=lambda p: "groupoids" in p.parts)
+                 if KIND_BRANCH.search(line)]
     assert not offending, "kind branches outside symvi/groupoids/:\n" + "\n".join(offending)
+
+
+def test_no_kind_branches_in_templates_and_runtime():
+    """Neither the templates nor the run time read a kind at all (the run time may show
+    ``INFO["kind"]`` in messages and results, never branch on it)."""
+    runtime = sorted((SYMVI / "_runtime").glob("*.py"))
+    templates = sorted((ROOT / "templates").glob("*.j2"))
+    offending = [where for where, line in _lines([*runtime, *templates])
+                 if re.search(r"""\bkind\b["']?\s*(==|!=|in\b)|F\.kind|"kind",""", line)]
+    assert not offending, "kind tests in templates/ or _runtime/:\n" + "\n".join(offending)
+
+
+def test_no_retraction_name_branches():
+    """Retractions differ by their classes' methods and the C macros they name; their
+    names are read only in the registry of symvi/groupoids/retraction.py (the bundled
+    models choose a name for their own, not a behaviour: symvi/models/ is user code)."""
+    registry = SYMVI / "groupoids" / "retraction.py"
+    offending = [where for where, line in _lines(_sources(),
+                                                 skip=lambda p: p == registry
+                                                 or p.parent == SYMVI / "models")
+                 if RETRACTION_BRANCH.search(line)]
+    assert not offending, "retraction-name branches:\n" + "\n".join(offending)
+
+
+#: Run-time files that still read the old flag, until they read what replaced it
+#: (compiled.py: ``paths.initial_layout(model).read``; issue 49).
+NODE_PAIRS_PENDING: set[str] = set()
+
+
+def test_the_runtime_reads_what_to_do_not_a_node_pairs_flag():
+    """The run time maps states to fibres and back through ``INFO["fibre_nodes"]`` and
+    reads initial data in the layout ``INFO["initial_layout"]`` names; no test of
+    ``node_pairs``."""
+    runtime = [p for p in sorted((SYMVI / "_runtime").glob("*.py"))
+               if p.name not in NODE_PAIRS_PENDING]
+    offending = [where for where, line in _lines([*runtime, SYMVI / "plots.py"])
+                 if "node_pairs" in line]
+    assert not offending, "node_pairs tests in the run time:\n" + "\n".join(offending)
+
+
+def test_the_branch_patterns_catch_what_they_must():
+    """The patterns above catch the branches that were removed (issue 49)."""
+    for line in ('if F.kind == "pair"', '{% if F.kind == "pair" %}', "if g.kind in ('a',):",
+                 '{% if factors | selectattr("kind", "equalto", "pair") | list %}',
+                 'if info["kind"] != "lie":', "READERS[groupoid.kind](x)",
+                 'READERS[info["kind"]](x)'):
+        assert KIND_BRANCH.search(line), line
+    for line in ('if self.retraction.name == "cayley":', '{% if G.retraction == "exp" %}',
+                 'groups | rejectattr("retraction", "equalto", "cayley")',
+                 'elif self.retraction.name == "exp" and _numeric(X):'):
+        assert RETRACTION_BRANCH.search(line), line
+    for line in ('kind=model.info["kind"], bound_multipliers=z',
+                 'def __exit__(self, kind, exc, tb):',
+                 'retraction: str = "cayley"', 'G = SO3(retraction=retraction)',
+                 '"name": dm.name, "kind": dm.kind,', "names.get(arr.dtype.kind, 'x')",
+                 "f\"(this is a {model.info['kind']} groupoid)\""):
+        assert not KIND_BRANCH.search(line) and not RETRACTION_BRANCH.search(line), line
 
 
 def test_no_module_level_import_circles():

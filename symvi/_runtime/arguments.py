@@ -12,6 +12,8 @@ from typing import Mapping, Sequence
 
 import numpy as np
 
+from .signs import SIGNS
+
 #: Largest value of a C ``int`` argument (maxiter): larger ones would overflow in cffi.
 INT_MAX = 2**31 - 1
 #: Largest value of a C ``long`` argument (step and node counts).
@@ -139,12 +141,6 @@ def _by_name(given: Mapping, names: Sequence[str]) -> dict[str, object]:
     if unknown:
         raise ValueError(f"unknown parameter(s) {unknown}; the model has {list(names)}")
     return named
-
-
-#: What a parameter declared with a sign assumption must satisfy, strongest first (the
-#: declaration reads its symbols' assumptions in this order: ``declaration.symbols.sign``).
-SIGNS = {"positive": (lambda v: v > 0, "> 0"), "nonnegative": (lambda v: v >= 0, "≥ 0"),
-         "negative": (lambda v: v < 0, "< 0"), "nonpositive": (lambda v: v <= 0, "≤ 0")}
 
 
 def parameters(names: Sequence[str], defaults: Sequence[float],

@@ -21,6 +21,7 @@ import numpy as np
 from . import batch_loop, stepping
 from .batch_arguments import Trajectories, trajectories
 from .legendre import TransformError, first_fibres
+from .options import StepOptions
 from .progress import Progress
 from .results import BatchResult, StepResult
 from .storage import bytes_per_node
@@ -31,8 +32,11 @@ TASKS_PER_WORKER = 8
 
 def integrate_many(model, initial, n_steps: int, h, params: Mapping | None = None, *,
                    workers: int | None = None, keep_every: int = 1, final_only: bool = False,
-                   maxiter: int = 50, xtol: float = 1e-12, ftol: float = 0.0,
-                   progress: bool | None = None, quantities: bool = True) -> BatchResult:
+                   maxiter: int = StepOptions.unset("maxiter"),
+                   xtol: float = StepOptions.unset("xtol"),
+                   ftol: float = StepOptions.unset("ftol"), progress: bool | None = None,
+                   quantities: bool = True, options: StepOptions | None = None,
+                   **keywords) -> BatchResult:
     """Integrate a batch of trajectories of ``n_steps`` steps each, in parallel threads.
 
     Parameters
@@ -54,6 +58,8 @@ def integrate_many(model, initial, n_steps: int, h, params: Mapping | None = Non
         or None for one when tqdm is installed and stderr is a terminal.
     quantities : compute each trajectory's momenta, energies and conserved quantities
         (default); False gives the paths alone (those fields None), less work and memory.
+    options, keywords : the steps' Newton options as one :class:`.options.StepOptions`,
+        as :func:`.stepping.integrate` takes them.
 
     Returns a :class:`BatchResult`: every array of :class:`StepResult` with a leading
     batch axis, each trajectory's status and message (``statuses``, ``messages``), and
@@ -65,7 +71,8 @@ def integrate_many(model, initial, n_steps: int, h, params: Mapping | None = Non
     """
     batch = trajectories(model, initial, n_steps, h, params, workers=workers,
                          keep_every=keep_every, final_only=final_only, maxiter=maxiter,
-                         xtol=xtol, ftol=ftol, quantities=quantities)
+                         xtol=xtol, ftol=ftol, quantities=quantities, options=options,
+                         keywords=keywords)
     run = _Run(model, batch)
     long = bytes_per_node(model, batch.quantities) * (batch.n_steps + 1) \
         > batch_loop.MAX_PATH_BYTES
@@ -94,7 +101,7 @@ class _Run:
                 with NamedErrors(b, self.stop):
                     results[b] = stepping.run_steps(
                         self.model, batch.item(b), batch.n_steps, batch.steps[b],
-                        batch.overrides(b), *batch.newton, batch.keep, False, self.stop,
+                        batch.overrides(b), batch.options, batch.keep, False, self.stop,
                         batch.quantities)
                 bar.update()
         run_threads(work, batch.size, workers, self.stop)
@@ -119,7 +126,7 @@ class _Run:
                 starts = _starts(self.model, batch.item, part, H, P, batch.from_state,
                                  self.stop)
                 batch_loop.run_slice(self.model, stacked, buffers, part, starts,
-                                     batch.n_steps, P, H, batch.from_state, *batch.newton)
+                                     batch.n_steps, P, H, batch.from_state, batch.options)
                 bar.update(len(part))
         run_threads(work, batch.size, workers, self.stop)
         return stacked.result()

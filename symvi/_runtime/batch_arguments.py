@@ -20,6 +20,7 @@ import numpy as np
 
 from . import arguments, boundary_states, stepping
 from .memory import require
+from .options import SolveOptions, StepOptions
 from .results import State
 from .bvp import solve_steps
 from .storage import bytes_per_node, check_path_memory
@@ -28,8 +29,8 @@ from .storage import bytes_per_node, check_path_memory
 TRAJECTORIES = ("trajectory", "trajectories")
 SOLVES = ("solve", "solves")
 
-#: The options of :func:`.bvp.solve_bvp` that a batch of solves passes on to each solve.
-SOLVE_OPTIONS = ("maxiter", "xtol", "ftol")
+#: What an unknown option's refusal adds in a batch of solves.
+NOT_RAISING = " (a batch keeps each failure in its result, it does not raise)"
 
 
 @dataclass(frozen=True)
@@ -57,7 +58,7 @@ class Overrides:
 class Trajectories:
     """``integrate_many``'s arguments, checked: member b starts from ``item(b)`` with the
     step ``steps[b]`` and the parameter vector ``parameters[b]`` (``overrides(b)`` as
-    given); ``newton`` is (maxiter, xtol, ftol)."""
+    given); ``options`` are every step's Newton options."""
 
     item: Callable[[int], object]
     size: int
@@ -68,7 +69,7 @@ class Trajectories:
     n_steps: int
     keep: int
     workers: int
-    newton: tuple[int, float, float]
+    options: StepOptions
     quantities: bool
 
 
@@ -87,7 +88,7 @@ class Solves:
     overrides: Overrides
     guesses: list | None
     workers: int
-    options: dict
+    options: SolveOptions
 
 
 @dataclass(frozen=True)
@@ -98,12 +99,16 @@ class Points:
     points: list[dict]
     size: int
     n_steps: int
-    options: dict
+    options: SolveOptions
 
 
 def trajectories(model, initial, n_steps: int, h, params: Mapping | None, *,
-                 workers: int | None, keep_every: int, final_only: bool, maxiter: int,
-                 xtol: float, ftol: float, quantities: bool) -> Trajectories:
+                 workers: int | None, keep_every: int, final_only: bool, quantities: bool,
+                 maxiter: int = StepOptions.unset("maxiter"),
+                 xtol: float = StepOptions.unset("xtol"),
+                 ftol: float = StepOptions.unset("ftol"),
+                 options: StepOptions | Mapping | None = None,
+                 keywords: Mapping | None = None) -> Trajectories:
     """The arguments of ``integrate_many`` (its docstring says what each is), checked in
     full: the batch, the options, the memory of the stacked paths, then each member's
     step and parameters."""
@@ -114,18 +119,20 @@ def trajectories(model, initial, n_steps: int, h, params: Mapping | None, *,
     keep = arguments.count(keep_every, "keep_every", 1)
     keep = n_steps if arguments.flag(final_only, "final_only") else keep
     workers = worker_count(workers)
-    newton = (arguments.iterations(maxiter), arguments.tolerance(xtol, "xtol"),
-              arguments.tolerance(ftol, "ftol"))
+    options = StepOptions.of(options, dict(maxiter=maxiter, xtol=xtol, ftol=ftol)
+                             | dict(keywords or {}), "integrate_many")
     quantities = arguments.flag(quantities, "quantities")
     _paths_fit(model, B, n_steps, keep, quantities)
     _positive(steps, np.ndim(h) == 0, TRAJECTORIES, arguments.step_size)
     parameters = _parameter_vectors(model, overrides, B, TRAJECTORIES)
     return Trajectories(item, B, isinstance(initial, State), steps, overrides, parameters,
-                        n_steps, keep, workers, newton, quantities)
+                        n_steps, keep, workers, options, quantities)
 
 
 def solves(model, starts, ends, n_steps: int, h, params: Mapping | None, *, T,
-           guesses: list | None, workers: int | None, options: Mapping) -> Solves:
+           guesses: list | None, workers: int | None,
+           options: SolveOptions | Mapping | None = None,
+           keywords: Mapping | None = None) -> Solves:
     """The arguments of ``solve_bvp_many`` (its docstring says what each is), checked in
     full: the batch, the options, the model's whole-trajectory solve and N, the memory of
     the results, then each solve's step or horizon and parameters."""
@@ -136,7 +143,7 @@ def solves(model, starts, ends, n_steps: int, h, params: Mapping | None, *, T,
     overrides = parameter_batch(params, B, SOLVES)
     guesses = _guesses(guesses, B)
     workers = worker_count(workers)
-    options = solve_options(options, "solve_bvp_many")
+    options = SolveOptions.of(options, keywords, "solve_bvp_many", NOT_RAISING)
     from_states = boundary_states.given(starts, ends)
     N = solve_steps(model, n_steps, from_states)
     check_path_memory(model, N + from_states)     # each solve's matrices, before any
@@ -150,7 +157,8 @@ def solves(model, starts, ends, n_steps: int, h, params: Mapping | None, *, T,
 
 
 def points(model, start, end, n_steps: int, h, path: Mapping | None, *, T,
-           params: Mapping | None, options: Mapping) -> Points:
+           params: Mapping | None, options: SolveOptions | Mapping | None = None,
+           keywords: Mapping | None = None) -> Points:
     """The arguments of ``continuation`` (its docstring says what each is), checked in
     full: the path, N, the step, the options, the memory of the results, then each
     point's parameters."""
@@ -163,7 +171,7 @@ def points(model, start, end, n_steps: int, h, path: Mapping | None, *, T,
     N = solve_steps(model, n_steps, from_states)
     check_path_memory(model, N + from_states)
     arguments.step_of(h, T, N)
-    options = solve_options(options, "continuation")
+    options = SolveOptions.of(options, keywords, "continuation", NOT_RAISING)
     _results_fit(model, K, N, from_states, f"a continuation of {K:,} solves",
                  "split the path into parts, each warm-started from the last result of "
                  "the one before (guess=), keeping only what each needs")
@@ -246,22 +254,6 @@ def usable_cores() -> int:
 def worker_count(workers: int | None) -> int:
     """Threads of a batch: at least one; None for the usable cores."""
     return arguments.count(workers if workers is not None else usable_cores(), "workers", 1)
-
-
-def solve_options(options: Mapping, call: str) -> dict:
-    """The options a batch of solves passes to each (``maxiter``, ``xtol``, ``ftol`` of
-    :func:`.bvp.solve_bvp`), checked; any other name is refused."""
-    unknown = sorted(set(options) - set(SOLVE_OPTIONS))
-    if unknown:
-        raise TypeError(f"{call}: unknown option(s) {', '.join(map(repr, unknown))}; it "
-                        f"passes {', '.join(SOLVE_OPTIONS)} on to solve_bvp (a batch keeps "
-                        f"each failure in its result, it does not raise)")
-    checked = dict(options)
-    if "maxiter" in checked:
-        checked["maxiter"] = arguments.iterations(checked["maxiter"])
-    for name in set(checked) & {"xtol", "ftol"}:
-        checked[name] = arguments.tolerance(checked[name], name)
-    return checked
 
 
 def result_bytes(model, n_steps: int, from_states: bool) -> float:

@@ -11,6 +11,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from .options import StepOptions
 from .results import BatchResult, Status
 from .stepping import entries, finite, layout, outcome
 from .storage import first_kept, kept_count
@@ -56,11 +57,11 @@ class Stacked:
 
 
 def run_slice(model, stacked: Stacked, buffers: "Scratch", indices, starts, n_steps: int,
-              P: np.ndarray, H: np.ndarray, from_state: bool, maxiter: int, xtol: float,
-              ftol: float) -> None:
+              P: np.ndarray, H: np.ndarray, from_state: bool, options: StepOptions) -> None:
     """Step the trajectories ``indices`` (their stencil prefixes and configurations
-    ``starts``, parameter rows P, steps H) by one C call into ``buffers``; store them in
-    ``stacked``."""
+    ``starts``, parameter rows P, steps H; Newton under ``options``) by one C call into
+    ``buffers``; store them in ``stacked``."""
+    maxiter = options.maxiter
     c, K = len(indices), model.stencil_elements
     new, E = n_steps - (K - 1), n_steps
     scratch = buffers.take(c)
@@ -71,7 +72,7 @@ def run_slice(model, stacked: Stacked, buffers: "Scratch", indices, starts, n_st
     rnorm = np.zeros(c)
     model.lib.symvi_integrate_batch(
         c, model.ptr(z0), model.ptr(g0), new, model.ptr(P), P.shape[1], model.ptr(H),
-        maxiter, xtol, ftol, *[model.ptr(scratch[k]) for k in ("x", "f", "g")],
+        maxiter, options.xtol, options.ftol, *[model.ptr(scratch[k]) for k in ("x", "f", "g")],
         ffi.from_buffer("int[]", scratch["newton_iterations"]), ffi.from_buffer("long[]", done),
         model.ptr(rnorm), ffi.from_buffer("int[]", status), int(stacked.quantities),
         *[model.ptr(scratch[k]) for k in ("momenta", "energy", "noether")])

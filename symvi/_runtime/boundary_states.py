@@ -2,10 +2,11 @@
 midpoint is the state.
 
 A second-order problem fixes its first and last elements, two nodes each. A state
-(position, velocity) at t = 0 fixes the element whose midpoint it is: on a pair groupoid
-q₀ = q − h v/2 and q₁ = q + h v/2; on a matrix Lie group g₀ = g τ(−hξ/2) and g₁ = g₀ τ(hξ),
-so that the increment is ξ and the midpoint g₀ τ(hξ/2) is g (τ(−a) = τ(a)⁻¹ for the Cayley
-map and the exponential). Element k is then the state at t_k = k·h, k = 0 … N, on
+(position, velocity) at t = 0 fixes the element whose midpoint it is: where each fibre
+coordinate copies a base coordinate of the next node (a pair groupoid, as the package
+records in ``INFO["fibre_nodes"]``) q₀ = q − h v/2 and q₁ = q + h v/2; on a matrix Lie
+group g₀ = g τ(−hξ/2) and g₁ = g₀ τ(hξ), so that the increment is ξ and the midpoint
+g₀ τ(hξ/2) is g (τ(−a) = τ(a)⁻¹ for the Cayley map and the exponential). Element k is then the state at t_k = k·h, k = 0 … N, on
 [0, T = N·h], and the nodes sit at the half steps t = (k − ½)h, k = 0 … N + 1.
 
 A window (elements k and k + 1) is centred at (k + ½)h, where both second-order rules
@@ -24,7 +25,23 @@ import numpy as np
 
 from . import arguments
 from .geometry import check_base_points, check_configurations
+from .paths import node_velocities
 from .results import BVPResult, State
+
+
+def _moves_nodes(model) -> bool:
+    """Whether every fibre coordinate is a copy of a base coordinate at the target node and
+    every base coordinate is copied (``INFO["fibre_nodes"]``; a pair groupoid): then a
+    state's velocity moves the base point, x ∓ h v/2."""
+    nodes = np.asarray(model.info["fibre_nodes"], dtype=int)
+    return bool((nodes >= 0).all()) and sorted(nodes.tolist()) == list(range(model.m))
+
+
+def _base_rate(model, v: np.ndarray) -> np.ndarray:
+    """ẋ of a state of velocity v: v_a moves the base coordinate its fibre copies."""
+    rate = np.zeros(model.m)
+    rate[np.asarray(model.info["fibre_nodes"], dtype=int)] = v
+    return rate
 
 
 def given(start, end) -> bool:
@@ -42,7 +59,7 @@ def check_supported(model) -> None:
     if model.order != 2:
         raise ValueError(f"model {name!r}: States are boundary data of second-order problems; "
                          f"an order-{model.order} problem fixes its end nodes only (positions)")
-    if not (model.info["node_pairs"] or model.m == 0):
+    if not (_moves_nodes(model) or model.m == 0):
         raise ValueError(f"model {name!r}: States as boundary data need a pair groupoid or "
                          f"matrix Lie groups (this is a {model.info['kind']} groupoid); give "
                          f"the first and last two nodes")
@@ -65,7 +82,8 @@ def element_nodes(model, state: State, h: float, what: str):
     if model.m:
         x = arguments.finite_array(state.x, (model.m,), f"the {what} state's position x")
         check_base_points(model, x[None], f"the {what} state's position x")
-        return np.stack([x - 0.5 * h * v, x + 0.5 * h * v])
+        rate = _base_rate(model, v)
+        return np.stack([x - 0.5 * h * rate, x + 0.5 * h * rate])
     g = model.configuration(state.g, f"the {what} state's configuration g")
     check_configurations(model, g[None], f"the {what} state's configuration g")
     first = _retract(model, g[None], v[None], -0.5 * h)
@@ -98,7 +116,8 @@ def attach(model, result: BVPResult, h: float) -> BVPResult:
     f = np.asarray(result.f, dtype=float)
     if model.m:
         x = np.asarray(result.x, dtype=float)
-        return replace(base, states=State(v=(x[1:] - x[:-1]) / h, x=0.5 * (x[1:] + x[:-1])))
+        return replace(base, states=State(v=node_velocities(model, x, f, h),
+                                          x=0.5 * (x[1:] + x[:-1])))
     blocks = result.g if isinstance(result.g, tuple) else (result.g,)
     g = np.concatenate([np.asarray(b, dtype=float).reshape(len(b), -1) for b in blocks], axis=1)
     finite = np.isfinite(g).all() and np.isfinite(f).all()

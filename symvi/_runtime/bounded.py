@@ -14,61 +14,62 @@ from __future__ import annotations
 import numpy as np
 
 from .interior import InteriorPoint
+from .newton import newton
+from .options import SolveOptions
 from .paths import Path
-from .penalty import STAGES
+from .penalty import infeasibility, nearly_feasible
 from .results import BVPResult, Status
 
 #: The failures after which the interior point starts again (and then tests infeasibility).
 FAILED = (Status.STALLED, Status.MAX_ITERATIONS)
 
 
-def bounded(model, problem, path: Path, maxiter: int, xtol: float, unbounded=None,
-            nearly_feasible=None, infeasibility=None, active=None) -> BVPResult:
-    """The interior-point solve of :func:`.bvp.solve_bvp` for a model with inequalities:
-    its result, SUCCESS only at a verified minimum within the tolerance (module
-    docstring).
+def bounded(problem, path: Path, options: SolveOptions, cold: bool,
+            active: np.ndarray | None = None) -> BVPResult:
+    """The interior-point solve of :func:`.bvp.solve_bvp` for a model with inequalities,
+    under the solve's ``options``: its result, SUCCESS only at a verified minimum within
+    the tolerance (module docstring).
 
-    ``unbounded(problem, path, maxiter, xtol)`` → (start or None, iterations,
-    converged), where given (a cold start), first solves the problem without
-    inequalities from the guess; the interior-point iteration starts from that optimum
+    A ``cold`` start first solves the problem without inequalities from the guess
+    (:func:`unbounded`); the interior-point iteration starts from that optimum
     (or that solve's last iterate) where it exists, from the guess otherwise, and the
     result counts every solve's iterations. The equality
     solver's globalisation is the better tested of the two far from a solution: from
     perturbed guesses whose torques exceed the bounds 400-fold, the interior-point steps
     were cut to α ≈ 10⁻² by the fraction-to-the-boundary rule and stalled; from the
     unbounded optimum it needs 20–30 iterations. Where the interior point then stalls or
-    runs out of iterations, ``nearly_feasible(problem, optimum, maxiter, xtol)`` →
-    (start, iterations, stages) moves that optimum toward the bounds by a quadratic
-    penalty (:mod:`.penalty`) and the interior point starts again from there — a retry,
-    not the first choice: on the cart-pole swing-up the penalised start is the worse one
-    (MAX_ITERATIONS at N = 60, against SUCCESS in 33 iterations from the optimum). Where
-    that fails the same way, ``infeasibility(problem, start, maxiter, xtol)`` →
-    (certificate or None, iterations) continues the penalty stages: a certificate
-    (:class:`.penalty.Infeasibility`) makes the result INFEASIBLE.
+    runs out of iterations, :func:`.penalty.nearly_feasible` moves that optimum toward
+    the bounds by a quadratic penalty and the interior point starts again from there — a
+    retry, not the first choice: on the cart-pole swing-up the penalised start is the
+    worse one (MAX_ITERATIONS at N = 60, against SUCCESS in 33 iterations from the
+    optimum). Where that fails the same way, :func:`.penalty.infeasibility` continues the
+    penalty stages: a certificate (:class:`.penalty.Infeasibility`) makes the result
+    INFEASIBLE. ``ftol`` is not used by any of them.
 
     ``active``: a warm start's active set (the previous result's, its multipliers in
     ``path``): the active-set Newton (:mod:`.polish`) is tried first from there, and the
     interior point runs only where it fails — along a continuation whose active set
     barely changes, a few Newton steps instead of a barrier solve.
     """
+    options = options.replace(ftol=0.0)
     if active is not None:
-        warm = _warm(problem, path, active, xtol)
+        warm = _warm(problem, path, active, options)
         if warm is not None:
             return warm
-    optimum, first, converged = unbounded(problem, path, maxiter, xtol) \
-        if unbounded is not None else (None, 0, False)
+    optimum, first, converged = unbounded(problem, path, options) if cold else \
+        (None, 0, False)
     without = "the optimum without bounds" if converged else \
         "the last iterate without bounds"
     phase = f"from {without} ({first} Newton iterations), " if optimum is not None else ""
     # a copy: the interior point sets the bound multipliers of the path it starts from
     ip, end, iterations, status, message = _interior(
-        problem, optimum.copy() if optimum is not None else path, maxiter, xtol)
+        problem, optimum.copy() if optimum is not None else path, options)
     total = first + iterations
-    if status in FAILED and optimum is not None and nearly_feasible is not None:
-        start, more, stages = nearly_feasible(problem, optimum, maxiter, xtol)
+    if status in FAILED and optimum is not None:
+        start, more, stages = nearly_feasible(problem, optimum, options)
         total += more
         if stages:
-            retry = _interior(problem, start, maxiter, xtol)
+            retry = _interior(problem, start, options)
             total += retry[2]
             # kept unless it failed the same way: a SUCCESS, or an ILL_CONDITIONED
             # that states the accuracy reached, says more than the first stall
@@ -79,8 +80,8 @@ def bounded(model, problem, path: Path, maxiter: int, xtol: float, unbounded=Non
                          f"there moved toward the bounds by "
                          f"{stages} penalty stage{'s' if stages > 1 else ''} ({before} "
                          f"iterations before), ")
-        if status in FAILED and stages == len(STAGES) and infeasibility is not None:
-            certificate, more = infeasibility(problem, start, maxiter, xtol)
+        if status in FAILED and stages == len(options.penalty_stages):
+            certificate, more = infeasibility(problem, start, options)
             total += more
             if certificate is not None:
                 end = certificate.least_violation(ip.inequalities, problem)
@@ -93,12 +94,27 @@ def bounded(model, problem, path: Path, maxiter: int, xtol: float, unbounded=Non
     return ip.result(end, total, status, message)
 
 
-def _warm(problem, path: Path, active: np.ndarray, xtol: float) -> BVPResult | None:
+def unbounded(problem, path: Path, options: SolveOptions):
+    """(start or None, Newton iterations, converged): the problem without its
+    inequalities (their multipliers held at zero) solved from ``path``, the interior-point
+    solve's start (:func:`bounded`); None where that solve ended on a
+    non-finite value, diverged or left the chart. An unconverged last iterate is start
+    enough, the iterations having moved it downhill from the guess: the cart-pole
+    swing-up at N = 1000 from the cubic guess needs 112 Newton iterations without bounds,
+    and after a hundred the interior point had started from the guess and stalled."""
+    solved, _, steps, status, _ = newton(problem, path.copy(), options,
+                                        "start without bounds")
+    problem.shift, problem.penalty, problem.convex = 0.0, 0.0, False
+    usable = status not in (Status.NON_FINITE, Status.DIVERGED, Status.OUTSIDE_CHART)
+    return (solved if usable else None), len(steps), status == Status.SUCCESS
+
+
+def _warm(problem, path: Path, active: np.ndarray, options: SolveOptions) -> BVPResult | None:
     """The result of the active-set Newton from a warm start's ``path`` and ``active``
     set where it ends at a verified minimum within the tolerance, else None."""
     problem.shift, problem.penalty, problem.convex = 0.0, 0.0, False
-    ip = InteriorPoint(problem, path.copy(), xtol)      # its copy's z are the barrier's
-    finished = ip.finish(path, xtol * (1.0 + problem.size(path)), active)
+    ip = InteriorPoint(problem, path.copy(), options)   # its copy's z are the barrier's
+    finished = ip.finish(path, options.xtol * (1.0 + problem.size(path)), active)
     if finished is None:
         return None
     end, message, steps = finished
@@ -106,12 +122,12 @@ def _warm(problem, path: Path, active: np.ndarray, xtol: float) -> BVPResult | N
                      f"warm start from the previous active set{message}")
 
 
-def _interior(problem, path: Path, maxiter: int, xtol: float):
+def _interior(problem, path: Path, options: SolveOptions):
     """(InteriorPoint, path, iterations, status, message) of the interior-point
     iteration from ``path``, the minimum test applied to a converged one."""
     problem.shift, problem.penalty, problem.convex = 0.0, 0.0, False
-    ip = InteriorPoint(problem, path, xtol)
-    path, iterations, status, message = ip.solve(path, maxiter)
+    ip = InteriorPoint(problem, path, options)
+    path, iterations, status, message = ip.solve(path)
     if status == Status.SUCCESS and ip.verified is not path:   # the active-set Newton's is
         status, message = ip.minimum(path, message)
     return ip, path, iterations, status, message

@@ -1,6 +1,9 @@
 """Whole-trajectory solve: Newton on all free nodes at once (DESIGN.md §4).
 
-The Newton loop and what it concludes. The unknowns are corrections η_j of the free
+The public solve and its fixed-horizon phase: the options checked once
+(:class:`.options.SolveOptions`) and passed whole to the phases — the Newton iteration
+(:mod:`.newton`), the bounded solve (:mod:`.bounded`), the free horizon (:mod:`.horizon`)
+— and what the fixed-horizon solve concludes. The unknowns are corrections η_j of the free
 nodes, applied as the node variation g → g·τ(η) (pair groupoid: q_j += η_j; matrix
 groups: g_j ← g_j τ(η_j), which keeps the product of the increments equal to g_0⁻¹g_N),
 and, with constraints, the multipliers λ^k of every window (paper §3.2, eq.
@@ -18,15 +21,15 @@ import numpy as np
 
 from . import arguments, boundary_states
 from .assembly import Problem
-from .band import cholesky_pivot, product
+from .band import cholesky_pivot
 from .barrier import check_boundary_data
 from .gauge import check_boundary
 from .horizon import free_horizon
 from .bounded import bounded
 from .diagnosis import diagnose
-from .globalisation import descent_step, line_search, natural_step
+from .newton import newton
 from .optimality import second_order
-from .penalty import infeasibility, nearly_feasible
+from .options import SolveOptions
 from .paths import Path, initial_path
 from .results import BVPResult, Status
 from .storage import check_path_memory as check_memory
@@ -53,8 +56,10 @@ def solve_steps(model, n_steps: int, from_states: bool) -> int:
 def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
               params: Mapping[str, float] | None = None, *, T: float | None = None,
               guess: str | np.ndarray | tuple | BVPResult | None = None,
-              maxiter: int = 100, xtol: float = 1e-9, ftol: float = 0.0,
-              raise_on_failure: bool = False) -> BVPResult:
+              maxiter: int = SolveOptions.unset("maxiter"),
+              xtol: float = SolveOptions.unset("xtol"),
+              ftol: float = SolveOptions.unset("ftol"), options: SolveOptions | None = None,
+              raise_on_failure: bool = False, **keywords) -> BVPResult:
     """Solve for the free nodes (and multipliers) with the first and last r nodes fixed
     (or, with end conditions, only the first).
 
@@ -91,10 +96,14 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
         continuation): its free nodes, its multipliers, and its fibres where both nodes
         are unchanged; with bounds also its bound multipliers and active set, from which
         the active-set Newton is tried before the interior point (:mod:`.polish`).
+    options, keywords : a :class:`.options.SolveOptions` (or a mapping of its fields),
+        or its fields as keywords (``maxiter=``, ``xtol=``, ``ftol=``, ``verbose=``, …;
+        an options object and a keyword for one field are refused together): it goes whole to every phase of the solve. A name that is not an
+        option is refused by name with the list of the valid ones. The main ones:
     maxiter, xtol, ftol : SUCCESS when the full Newton correction ‖Δ‖∞ — the estimate
         of the error left in the path (unknowns: node corrections and multipliers) —
         plus the rounding floor below is at most xtol·(1 + size), size the largest
-        unknown (:func:`_within_tolerance`), or when ‖R‖∞ ≤ ftol. The floor counts
+        unknown (:func:`.newton._within_tolerance`), or when ‖R‖∞ ≤ ftol. The floor counts
         twice (a sample of the rounding noise can miss its worst direction), and
         corrections shrinking only linearly, by ρ > ½ per iteration, count as the error
         ρ/(1 − ρ)·‖Δ‖ they leave.
@@ -125,8 +134,8 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
     from_states = boundary_states.given(start, end)
     N = solve_steps(model, n_steps, from_states)
     h, p = arguments.step_of(h, T, N), model.params(params)
-    xtol, ftol = arguments.tolerance(xtol, "xtol"), arguments.tolerance(ftol, "ftol")
-    maxiter = arguments.iterations(maxiter)
+    options = SolveOptions.of(options, dict(maxiter=maxiter, xtol=xtol, ftol=ftol) | keywords,
+                              "solve_bvp")
     check_memory(model, N + from_states)
     if from_states:
         if isinstance(guess, BVPResult) and guess.t_states is not None \
@@ -135,21 +144,22 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
                              f"number of steps ({len(guess.t_states) - 1}), not n_steps = {N}")
         nodes = (boundary_states.element_nodes(model, start, h, "start"),
                  boundary_states.element_nodes(model, end, h, "end"))
-        result = boundary_states.attach(model, _fixed_horizon(
-            model, *nodes, N + 1, h, p, guess, maxiter, xtol, ftol), h)
+        result = boundary_states.attach(model, fixed_horizon(
+            model, *nodes, N + 1, h, p, guess, options), h)
     elif info.get("free_horizon"):
         result = free_horizon(
-            lambda step, previous: _fixed_horizon(model, start, end, N, step, p, (
-                guess if previous is None else previous), maxiter, xtol, ftol),
-            model, p, N, h, xtol)
+            lambda step, previous: fixed_horizon(model, start, end, N, step, p, (
+                guess if previous is None else previous), options),
+            model, p, N, h, options)
     else:
-        result = _fixed_horizon(model, start, end, N, h, p, guess, maxiter, xtol, ftol)
+        result = fixed_horizon(model, start, end, N, h, p, guess, options)
     return result.raise_for_status() if raise_on_failure else result
 
 
-def _fixed_horizon(model, start, end, N: int, h: float, p, guess, maxiter: int,
-                   xtol: float, ftol: float) -> BVPResult:
-    """The whole-trajectory solve at the step h: see :func:`solve_bvp`."""
+def fixed_horizon(model, start, end, N: int, h: float, p, guess,
+                  options: SolveOptions) -> BVPResult:
+    """The whole-trajectory solve at the step h under ``options``: see :func:`solve_bvp`
+    (with inequalities, :func:`.bounded.bounded`)."""
     path = initial_path(model, start, end, N, guess, p, h)
     if isinstance(path, BVPResult):
         return path
@@ -159,11 +169,10 @@ def _fixed_horizon(model, start, end, N: int, h: float, p, guess, maxiter: int,
         cold = not isinstance(guess, BVPResult)
         active = None if cold or guess.active is None \
             or guess.active.shape != path.lam[:, model.constraints:].shape else guess.active
-        return bounded(model, problem, path, maxiter, xtol, _unbounded if cold else None,
-                       _nearly_feasible, _infeasibility, active)
+        return bounded(problem, path, options, cold, active)
     if model.info.get("gauges"):
         check_boundary(model, path, problem.perturbed(path), p, h)
-    path, norms, steps, status, message = _newton(problem, path, maxiter, xtol, ftol)
+    path, norms, steps, status, message = newton(problem, path, options)
     if status == Status.SUCCESS and problem.minimise:
         status, message = _minimum(problem, path, message)
     if status == Status.SUCCESS:
@@ -179,30 +188,6 @@ def _fixed_horizon(model, start, end, N: int, h: float, p, guess, maxiter: int,
         t=h * np.arange(N + 1), iterations=len(steps), residual_norms=np.array(norms),
         step_norms=np.array(steps), status=status, message=message))
     return _finite(result)
-
-
-def _unbounded(problem: Problem, path: Path, maxiter: int, xtol: float):
-    """(start or None, Newton iterations, converged): the problem without its
-    inequalities (their multipliers held at zero) solved from ``path``, the interior-point
-    solve's start (:func:`.bounded.bounded`); None where that solve ended on a
-    non-finite value, diverged or left the chart. An unconverged last iterate is start
-    enough, the iterations having moved it downhill from the guess: the cart-pole
-    swing-up at N = 1000 from the cubic guess needs 112 Newton iterations without bounds,
-    and after a hundred the interior point had started from the guess and stalled."""
-    solved, _, steps, status, _ = _newton(problem, path.copy(), maxiter, xtol, 0.0)
-    problem.shift, problem.penalty, problem.convex = 0.0, 0.0, False
-    usable = status not in (Status.NON_FINITE, Status.DIVERGED, Status.OUTSIDE_CHART)
-    return (solved if usable else None), len(steps), status == Status.SUCCESS
-
-
-def _nearly_feasible(problem: Problem, optimum: Path, maxiter: int, xtol: float):
-    """:func:`.penalty.nearly_feasible` with this module's Newton iteration."""
-    return nearly_feasible(problem, optimum, _newton, maxiter, xtol)
-
-
-def _infeasibility(problem: Problem, start: Path, maxiter: int, xtol: float):
-    """:func:`.penalty.infeasibility` with this module's Newton iteration."""
-    return infeasibility(problem, start, _newton, maxiter, xtol)
 
 
 def _minimum(problem: Problem, path: Path, message: str) -> tuple[Status, str]:
@@ -244,13 +229,6 @@ def _finite(result: BVPResult) -> BVPResult:
                 f"precision)"))
     return result
 
-
-#: A Newton correction at the residual's rounding level within this factor of the
-#: rounding floor (:meth:`.assembly.Problem.rounding_correction`), and not half the one
-#: before, is noise: iterating on cannot shrink it (the heavy top with rotors at
-#: N = 10⁵ and xtol = 1e-9: 60 iterations, 590 s, corrections between 1e-5 and 1e-3
-#: against a floor of 2e-4).
-NOISE = 10.0
 
 #: Below this many steps a Newton matrix singular to working precision is not the
 #: conditioning's growth with N (heavy_top_rotors_oc_variational at N = 4: 1/κ = 0).
@@ -299,174 +277,3 @@ def _result(model, path: Path, p, h, common: dict) -> BVPResult:
                      if model.end_count else None,
                      controls=controls, cost=cost if windows > 0 else 0.0,
                      kind=model.info["kind"], **common)
-
-
-def _newton(problem, state, maxiter: int, xtol: float, ftol: float):
-    """Damped Newton; returns (state, residual norms, step norms, status, message)."""
-    from scipy.linalg import LinAlgError
-
-    norms, steps, corrections = [], [], [np.inf]
-    for it in range(maxiter):
-        try:
-            state, taken, status, message = _iteration(problem, state, it, xtol, ftol, norms,
-                                                       corrections)
-        except LinAlgError as exc:
-            # a shifted or gauged Newton matrix with a zero pivot in its band LU
-            return state, norms, steps, Status.SINGULAR_JACOBIAN, (
-                f"singular Newton matrix at iteration {it} ({exc})")
-        if taken is not None:
-            steps.append(taken)
-        if status is not None:
-            if status is Status.SUCCESS and taken is not None:
-                # the residual of the path returned, after the last update (with the
-                # Jacobian that the second-order test of a minimum needs next)
-                norms.append(_residual_norm(problem, state, problem.minimise))
-            return state, norms, steps, status, message
-    norms.append(_residual_norm(problem, state))
-    return (state, norms, steps, Status.MAX_ITERATIONS,
-            f"Newton's method did not converge in {maxiter} iterations")
-
-
-def _residual_norm(problem, state, with_jacobian: bool = False) -> float:
-    return float(np.abs(problem.assemble(state, with_jacobian)[0]).max(initial=0.0))
-
-
-def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list,
-               corrections: list):
-    """One damped Newton iteration from ``state`` (its residual norm appended to
-    ``norms``, its full Newton correction to ``corrections``): (state, step taken or
-    None, final status or None, message)."""
-    from scipy.linalg import LinAlgError
-
-    res, ab, bw, finite = problem.assemble(state, True)
-    norms.append(float(np.abs(res).max(initial=0.0)))
-    if not finite:
-        return state, None, Status.NON_FINITE, f"non-finite residual or Jacobian at iteration {it}"
-    try:
-        delta = problem.solve(ab, bw, -res)
-    except LinAlgError:
-        # even at R = 0: the solution is then not isolated (e.g. L_d ≡ 0)
-        return state, None, Status.SINGULAR_JACOBIAN, f"singular Jacobian at iteration {it}"
-    if norms[-1] <= ftol:
-        return state, None, Status.SUCCESS, ""
-    # SUCCESS only on full Newton corrections, the estimate of the error left (a damped
-    # step may be short far from the solution), with the rounding floor beside them
-    size = float(np.abs(delta).max(initial=0.0))
-    tolerance = xtol * (1.0 + problem.size(state))
-    corrections.append(size)
-    level = _rounding_level(problem.model, ab, bw, problem.magnitudes(state))
-    problem.level = level
-    if size <= tolerance:
-        return _within_tolerance(problem, state, ab, bw, res, delta, size, tolerance,
-                                 corrections[-2], it)
-    taken = None
-    if norms[-1] <= level:
-        # the floor costs an update, a residual and a solve: only once Newton stops
-        # contracting
-        floor = problem.rounding_correction(ab, bw, state, res) \
-            if size > corrections[-2] / 2 else 0.0
-        if tolerance < floor and size <= NOISE * floor:
-            return state, None, *_rounding_limited(
-                f"the residual ({norms[-1]:.1e}) is at its rounding level ({level:.1e}) "
-                f"and the Newton correction ({size:.1e}) is of the size of the one "
-                f"that undoes rounding the path's unknowns by one unit in the last "
-                f"place ({floor:.1e})", max(size, floor), tolerance)
-        state, taken = natural_step(problem, state, delta, ab, bw, size)
-        problem.convex = False
-    if taken is None and problem.minimise:
-        state, taken = descent_step(problem, state, res, ab, bw, delta,
-                                    contracting=size <= corrections[-2] / 4)
-    if taken is None and norms[-1] > level:
-        state, taken = line_search(problem, state, delta, res)
-        problem.convex = False
-    if taken is None:
-        if norms[-1] <= level:  # no descent left below the rounding level
-            return state, None, *_rounding_limited(
-                f"the residual ({norms[-1]:.1e}) is at its rounding level ({level:.1e}), "
-                f"where the Newton correction, the estimated error of the path, is "
-                f"{size:.1e}", size, tolerance)
-        return state, None, Status.STALLED, f"line search stalled at iteration {it}"
-    return state, taken, None, ""
-
-
-def _within_tolerance(problem, state, ab, bw: int, res, delta, size: float,
-                      tolerance: float, previous: float, it: int):
-    """The iteration once the full Newton correction Δ of ``state`` is within the
-    tolerance: (state, step taken, status or None, message) as :func:`_iteration`.
-
-    To first order the error of ``state`` is at most ‖Δ‖∞ plus the rounding noise of R
-    amplified by J⁻¹, which the rounding floor estimates
-    (:meth:`.assembly.Problem.rounding_correction`, with this J and R): SUCCESS when the
-    sum is within the tolerance, returning state + Δ, closer still where Newton
-    contracts. A correction small by cancellation against that noise (the heavy top with
-    rotors at N = 10⁴ passed two in a row below 1.9e-7 by luck, its multipliers 1e-6
-    off) is caught by the floor; a first small correction that did not halve the one
-    before is judged at the next iteration. Where the floor exceeds the tolerance, or a
-    non-contracting correction and the floor together do, the path is
-    ``ILL_CONDITIONED``.
-
-    Corrections that shrink only linearly, by a rate ρ = ‖Δ_k‖/‖Δ_{k−1}‖ in (½, 1) (a
-    Newton matrix so ill-conditioned that its solves are inexact: minimum jerk at
-    N = 2500 took 94 iterations at ρ ≈ 0.91), leave an error ρ/(1 − ρ)·‖Δ‖ after the step,
-    which takes the place of ‖Δ‖: below the tolerance with the floor, SUCCESS; above it,
-    Newton goes on."""
-    moved = problem.moved(state, delta, 1.0)    # round-off defeats a line search
-    if moved is None:
-        return state, None, Status.STALLED, (
-            f"the full Newton step leaves the retraction's chart at iteration {it}")
-    contracting = size <= previous / 2
-    if not contracting and previous > tolerance:
-        return moved, size, None, ""
-    rate = size / previous
-    slow = not contracting and rate < 1.0
-    error = size * rate / (1.0 - rate) if slow else size
-    floor = problem.rounding_correction(ab, bw, state, res)
-    if tolerance / EDGE < error + MARGIN * floor:
-        # near the edge one direction could be luck: two more (each a residual and a
-        # solve; always taking them cost rigid_body_oc at N = 1000 4.7 → 5.9 ms)
-        floor = max(floor, problem.rounding_correction(ab, bw, state, res, range(1, 3)))
-    if error + MARGIN * floor <= tolerance:
-        linear = (f" (shrinking linearly by {rate:.2f}: error estimate {error:.1e})"
-                  if slow else "")
-        return moved, size, Status.SUCCESS, (
-            f"; last Newton correction {size:.1e}{linear}, rounding floor {floor:.1e}")
-    if (contracting or slow) and floor < tolerance:
-        return moved, size, None, ""
-    return moved, size, *_rounding_limited(
-        f"the Newton correction ({size:.1e}) is within the tolerance, but with the one "
-        f"that undoes rounding the path's unknowns by one unit in the last place "
-        f"({floor:.1e}) it bounds the error by {size + floor:.1e}", size + floor, tolerance)
-
-
-#: Where the correction plus one rounding floor comes within this factor of the
-#: tolerance, the floor takes two more random directions: across eight, the floors of
-#: cart_pole_oc at N = 1000 varied within 4×.
-EDGE = 4.0
-#: The floor is a sample — the largest of at most three random directions — of a noise
-#: whose worst direction can be larger: SUCCESS asks the correction plus this many floors
-#: to be within the tolerance. An order-5 minimum-jerk-like solve at N = 150 was 4.9 off
-#: with a correction 0.33 and a floor 2.0 under a tolerance 4.0.
-MARGIN = 2.0
-
-
-def _rounding_limited(finding: str, attainable: float, tolerance: float):
-    """Status and message when rounding, not Newton, bounds the error left (``finding``
-    says how it showed, ``attainable`` the estimate of that error) above the tolerance:
-    never SUCCESS (issue 20). The correction is rounding noise amplified by the
-    conditioning of the Newton matrix, so its size is the attainable accuracy."""
-    return Status.ILL_CONDITIONED, (
-        f"{finding} > the tolerance xtol·(1 + size) = {tolerance:.1e}: rounding amplified "
-        f"by the Newton matrix's conditioning limits the attainable accuracy to about "
-        f"{attainable:.0e}; accept it with a larger xtol, or use fewer steps")
-
-
-def _rounding_level(model, ab: np.ndarray, bw: int, u: np.ndarray) -> float:
-    """Attainable residual: 16 ε ‖ |J| u ‖∞, u the unknowns' magnitudes (first order);
-    ``ab`` holds J in LAPACK band storage, ab[2 bw + row − col, col] = J[row, col].
-
-    When the line search finds no descent from a residual below it, Newton has converged
-    as far as floating point allows, even if its update, amplified by the condition
-    number (∝ N⁴ for fourth differences), still exceeds xtol.
-    """
-    scale = product(model, ab, bw, u, absolute=True)
-    return 16 * np.finfo(float).eps * float(scale.max(initial=0.0))

@@ -18,13 +18,15 @@ import numpy as np
 from .batch import NamedErrors, run_threads
 from .batch_arguments import points, solves
 from .bvp import solve_bvp
+from .options import SolveOptions
 from .progress import Progress
 from .results import BVPBatch, BVPResult
 
 
 def solve_bvp_many(model, starts, ends, n_steps: int, h=None, params: Mapping | None = None,
                    *, T=None, guesses: list | None = None, workers: int | None = None,
-                   progress: bool | None = None, **options) -> BVPBatch:
+                   progress: bool | None = None, options: SolveOptions | None = None,
+                   **keywords) -> BVPBatch:
     """Solve a batch of whole-trajectory problems on worker threads.
 
     Parameters
@@ -38,7 +40,8 @@ def solve_bvp_many(model, starts, ends, n_steps: int, h=None, params: Mapping | 
     workers : threads (default: the cores this process may use).
     progress : a progress bar of finished solves (``tqdm``): True, False, or None for one
         when tqdm is installed and stderr is a terminal.
-    options : ``maxiter``, ``xtol``, ``ftol`` of :func:`.bvp.solve_bvp`.
+    options : the :class:`.options.SolveOptions` of every solve, or its fields as
+        keywords (``maxiter``, ``xtol``, ``ftol``, …), as :func:`.bvp.solve_bvp` takes them.
 
     Returns a :class:`BVPBatch`: ``result[b]`` is solve b's :class:`BVPResult`, ``cost``,
     ``T`` and ``statuses`` are arrays over the batch; SUCCESS only when every solve
@@ -48,7 +51,7 @@ def solve_bvp_many(model, starts, ends, n_steps: int, h=None, params: Mapping | 
     together is refused with a ``MemoryError`` giving the estimate.
     """
     batch = solves(model, starts, ends, n_steps, h, params, T=T, guesses=guesses,
-                   workers=workers, options=options)
+                   workers=workers, options=options, keywords=keywords)
     results: list[BVPResult | None] = [None] * batch.size
     stop = threading.Event()
 
@@ -63,7 +66,7 @@ def solve_bvp_many(model, starts, ends, n_steps: int, h=None, params: Mapping | 
                     batch.overrides(b),
                     T=None if batch.horizons is None else float(batch.horizons[b]),
                     guess=None if batch.guesses is None else batch.guesses[b],
-                    **batch.options)
+                    options=batch.options)
             bar.update()
     with Progress(batch.size, "solves", progress) as bar:
         run_threads(work, batch.size, batch.workers, stop)
@@ -72,7 +75,8 @@ def solve_bvp_many(model, starts, ends, n_steps: int, h=None, params: Mapping | 
 
 def continuation(model, start, end, n_steps: int, h=None, path: Mapping | None = None, *,
                  T=None, params: Mapping | None = None, guess=None,
-                 progress: bool | None = None, **options) -> BVPBatch:
+                 progress: bool | None = None, options: SolveOptions | None = None,
+                 **keywords) -> BVPBatch:
     """Solve along a path of parameter values, each solve warm-started from the last
     success.
 
@@ -85,7 +89,8 @@ def continuation(model, start, end, n_steps: int, h=None, path: Mapping | None =
         last solve before it that succeeded (its path, multipliers and, with bounds, its
         active set), or cold if none did.
     progress : a progress bar of finished solves, as in :func:`solve_bvp_many`.
-    options : ``maxiter``, ``xtol``, ``ftol`` of :func:`.bvp.solve_bvp`.
+    options : the :class:`.options.SolveOptions` of every solve, or its fields as
+        keywords, as in :func:`solve_bvp_many`.
 
     Returns a :class:`BVPBatch` of the K solves in order, whose message names the
     failures. Every argument, each point's parameters included, is checked before the
@@ -93,12 +98,12 @@ def continuation(model, start, end, n_steps: int, h=None, path: Mapping | None =
     in memory together is refused with a ``MemoryError`` giving the estimate.
     """
     checked = points(model, start, end, n_steps, h, path, T=T, params=params,
-                     options=options)
+                     options=options, keywords=keywords)
     results, previous = [], guess
     with Progress(checked.size, "solves", progress) as bar:
         for point in checked.points:
             result = solve_bvp(model, start, end, checked.n_steps, h, point, T=T,
-                               guess=previous, **checked.options)
+                               guess=previous, options=checked.options)
             results.append(result)
             bar.update()
             if result.success:

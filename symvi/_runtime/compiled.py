@@ -10,9 +10,10 @@ from . import arguments
 from .batch import integrate_many
 from .bvp import solve_bvp
 from .bvp_batch import continuation, solve_bvp_many
-from .geometry import check_base_points, check_configurations
+from .geometry import check_configurations
 from .legendre import first_fibres, state_arrays
-from .paths import increments
+from .options import SolveOptions, StepOptions
+from .paths import increments, initial_layout
 from .results import State
 from .stepping import integrate
 
@@ -39,6 +40,10 @@ class CompiledModel:
     fibre_dim (n), parameters, defaults, kernels (name → z length and output sizes),
     has_energy, bvp.
     """
+
+    #: The options of the whole-trajectory solve and of the step map (``options=`` of
+    #: :meth:`solve_bvp` and :meth:`integrate`), this package's own classes.
+    SolveOptions, StepOptions = SolveOptions, StepOptions
 
     def __init__(self, ffi, lib, info: Mapping):
         self.ffi, self.lib, self.info = ffi, lib, dict(info)
@@ -250,25 +255,7 @@ class CompiledModel:
             x0, v0, g0 = self.state_parts(initial)
             f0 = first_fibres(self, x0[None], v0[None], np.array([h]), p[None])[0]
             return np.concatenate([x0, f0]), g0
-        K = self.stencil_elements
-        if self.info["node_pairs"]:
-            nodes = arguments.finite_array(initial, (K, self.n),
-                                           f"initial nodes (the first {K} nodes q_0..q_{K - 1})")
-            return nodes.reshape(-1), np.zeros(1)
-        parts = list(initial) if isinstance(initial, (tuple, list)) else [initial]
-        x0 = [] if self.m == 0 else parts.pop(0) if parts else None
-        fibres = parts.pop() if parts else None
-        if fibres is None or len(parts) > 1:
-            layout = "(g_0, f)" if self.m == 0 else "(x_0, f) or (x_0, g_0, f)"
-            raise ValueError(f"initial data must be {layout}")
-        fibres = arguments.finite_array(fibres, (K - 1, self.n),
-                                        f"initial increments (the first {K - 1} fibre parts)")
-        x0 = arguments.finite_array(x0, (self.m,), "initial base point x_0")
-        check_base_points(self, x0[None, :], "initial base point x_0")
-        g0 = self.configuration(parts[0] if parts else None)
-        if self.matrix_dims:
-            check_configurations(self, g0[None, :], "initial configuration g_0")
-        return np.concatenate([x0, fibres.reshape(-1)]), g0
+        return initial_layout(self).read(self, initial)
 
     def configuration(self, given=None, what: str = "initial configuration g_0") -> np.ndarray:
         """One node's configurations, flattened factor by factor (Σ d² numbers): ``given``

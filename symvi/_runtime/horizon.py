@@ -10,7 +10,8 @@ changed sign, each inner solve warm-started from the last (its fibres rescaled t
 the elements); a trial horizon whose solve fails (too short for the bounds: no path
 meets them) is moved halfway back to the last solved one. SUCCESS needs every inner
 solve's SUCCESS and the secant's estimate of the distance to the root,
-|F'(T)| / |F''(T)|, within xtol·(1 + T).
+|F'(T)| / |F''(T)|, within xtol·(1 + T). The outer iterations and retries are the
+solve's options (``horizon_maxiter``, ``horizon_retries``: :class:`.options.SolveOptions`).
 """
 from __future__ import annotations
 
@@ -18,11 +19,8 @@ from dataclasses import replace
 
 import numpy as np
 
+from .options import SolveOptions
 from .results import BVPResult, Status
-
-#: Outer (horizon) iterations before MAX_ITERATIONS, and retries halfway back to the last
-#: solved horizon when a trial horizon's solve fails.
-MAX_HORIZON_STEPS, RETRIES = 40, 6
 
 
 def slope(model, result: BVPResult, p) -> float:
@@ -43,16 +41,18 @@ def slope(model, result: BVPResult, p) -> float:
     return derivative / N + float(values[0, -1])
 
 
-def free_horizon(solve, model, p, N: int, h: float, xtol: float) -> BVPResult:
-    """Minimise J* + ρT over T from T = N·h. ``solve(h, guess)`` is the fixed-horizon
-    whole-trajectory solve (guess: a previous result or None)."""
+def free_horizon(solve, model, p, N: int, h: float, options: SolveOptions) -> BVPResult:
+    """Minimise J* + ρT over T from T = N·h under the solve's ``options``. ``solve(h,
+    guess)`` is the fixed-horizon whole-trajectory solve (:func:`.bvp.fixed_horizon` at
+    everything else the solve's, guess: a previous result or None)."""
+    xtol = options.xtol
     T, result = N * h, solve(h, None)
     if not result.success:
         return _failed(result, T, "at the first horizon")
     history = [(T, slope(model, result, p))]     # (horizon, F') of every solve
     bracket = None
     step = 0.1 * T
-    for _ in range(MAX_HORIZON_STEPS):
+    for _ in range(options.horizon_maxiter):
         T_now, g_now = history[-1]
         if len(history) == 1:
             T_next = T_now - np.sign(g_now) * step
@@ -72,7 +72,7 @@ def free_horizon(solve, model, p, N: int, h: float, xtol: float) -> BVPResult:
                 T_next = 0.5 * (low + high)
         T_next = max(T_next, 0.5 * T_now)        # the horizon stays positive
         trial = solve(T_next / N, result)
-        for _ in range(RETRIES):
+        for _ in range(options.horizon_retries):
             if trial.success:
                 break
             # a horizon too short for the bounds (or a solve that failed there): halfway
@@ -86,7 +86,7 @@ def free_horizon(solve, model, p, N: int, h: float, xtol: float) -> BVPResult:
         bracket = _bracket(history)
         step *= 2.0
     return replace(result, status=Status.MAX_ITERATIONS, message=(
-        f"the free horizon did not converge in {MAX_HORIZON_STEPS} steps (last T = "
+        f"the free horizon did not converge in {options.horizon_maxiter} steps (last T = "
         f"{history[-1][0]:.10g}, dJ/dT + ρ = {history[-1][1]:.2e}); {result.message}"))
 
 

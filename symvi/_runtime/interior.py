@@ -28,28 +28,30 @@ MAX_ITERATIONS.
 """
 from __future__ import annotations
 
+import sys
+
 import numpy as np
 
 from .band import cholesky_pivot
 from .barrier import Inequalities, next_barrier
 from .interior_steps import step
 from .optimality import Curvature, second_order
+from .options import SolveOptions
 from .paths import Path
 from .polish import SAMPLES, polish
 from .results import BVPResult, Status
 
-#: Initial barrier parameter (per unit time) and the factor on xtol of its floor.
-MU_START, MU_FLOOR = 0.1, 1e-3
-#: The barrier problem counts as solved when the node part of its Newton correction is
-#: within this multiple of μ (IPOPT's κ_ε). Not its multipliers: those of nearly
-#: dependent active rows (the cart-pole's track limit touched at adjacent windows, whose
-#: quadrature points share nodes) are fixed by the barrier problem only weakly — from
-#: perturbed guesses at N = 1000 their corrections stayed near 3 for 250 iterations at
-#: μ = 8e-4 while the nodes' were 0.05, and μ never fell. SUCCESS still asks the whole
-#: KKT correction (nodes, λ and z) within the tolerance.
-KAPPA_EPSILON = 10.0
-#: Iterations over which the KKT correction must halve to count as still converging.
-STAGNATION = 6
+# The barrier parameter's start and floor (mu_start, mu_floor·xtol), the test of a solved
+# barrier problem (kappa_epsilon) and of stagnation are the solve's options
+# (:class:`.options.SolveOptions`). The barrier problem counts as solved when the node
+# part of its Newton correction is within kappa_epsilon·μ (IPOPT's κ_ε). Not its
+# multipliers: those of nearly dependent active rows (the cart-pole's track limit
+# touched at adjacent windows, whose quadrature points share nodes) are fixed by the
+# barrier problem only weakly — from perturbed guesses at N = 1000 their corrections
+# stayed near 3 for 250 iterations at μ = 8e-4 while the nodes' were 0.05, and μ never
+# fell. SUCCESS still asks the whole KKT correction (nodes, λ and z) within the
+# tolerance.
+
 #: Penalties ρ (times W's scale over |∇c_j|²) on the active inequalities in the final
 #: second-order test, and the cap on Σ in the iteration's inertia test (×10⁶). No more
 #: than 10² of W's scale: the Cholesky factorisation's rounding grows as ε·ρ·‖W‖, and at
@@ -60,10 +62,13 @@ PENALTIES, CAP = (0.0, 1.0, 1e2), 1e6
 
 
 class InteriorPoint:
-    """The interior-point iteration on one :class:`.assembly.Problem` and path."""
+    """The interior-point iteration on one :class:`.assembly.Problem` and path, under the
+    solve's :class:`.options.SolveOptions` (the active-set Newton of :mod:`.polish`
+    reads them here too)."""
 
-    def __init__(self, problem, path: Path, xtol: float):
-        self.problem, self.model, self.xtol = problem, problem.model, xtol
+    def __init__(self, problem, path: Path, options: SolveOptions):
+        self.problem, self.model, self.xtol = problem, problem.model, options.xtol
+        self.options = options
         m = self.model
         self.s_count = m.constraints
         self.inequalities = Inequalities(m, path.x.shape[0])
@@ -71,7 +76,7 @@ class InteriorPoint:
         self.width = m.n + m.constraints
         self.rows = problem.constraint_rows(path)
         self.nodes = ~self.rows
-        self.mu, self.floor = MU_START, MU_FLOOR * xtol
+        self.mu, self.floor = options.mu_start, options.mu_floor * options.xtol
         self.corrections: list[float] = []     # the KKT corrections, one per iteration
         self.best = (np.inf, path, None)        # (correction, path, slacks) of the best
         self.verified = None        # a path :meth:`minimum` has verified (:meth:`finish`)
@@ -125,16 +130,20 @@ class InteriorPoint:
         return np.concatenate([delta, self.steps(delta, path, 0.0)[1].ravel()])
 
     # -- the iteration -------------------------------------------------------------------
-    def solve(self, path: Path, maxiter: int):
-        """Iterate from ``path``: (path, iterations, status, message)."""
+    def solve(self, path: Path):
+        """Iterate from ``path``, at most ``options.maxiter`` times: (path, iterations,
+        status, message)."""
         from scipy.linalg import LinAlgError
 
+        maxiter = self.options.maxiter
         for it in range(maxiter):
             try:
                 path, status, message = self.iteration(path, it)
             except LinAlgError as exc:
                 return path, it, Status.SINGULAR_JACOBIAN, (
                     f"singular Newton matrix at interior-point iteration {it} ({exc})")
+            if self.options.verbose:
+                self._report(it, status)
             if status in (Status.STALLED, Status.MAX_ITERATIONS):
                 return self._failed(path, it + 1, status, message)
             if status is not None:
@@ -242,7 +251,7 @@ class InteriorPoint:
             # a smaller μ only adds rounding (Σ = z/s grows as 1/μ on active rows)
             biased = correction - error > tolerance / 2
             nodes = float(np.abs(delta[self.nodes]).max(initial=0.0))
-            if nodes > KAPPA_EPSILON * self.mu * (1.0 + self.problem.size(path)) \
+            if nodes > self.options.kappa_epsilon * self.mu * (1.0 + self.problem.size(path)) \
                     or self.mu <= self.floor or not biased:
                 break
             # the barrier problem is solved: the same matrix serves the next μ
@@ -305,15 +314,15 @@ class InteriorPoint:
     def _stagnant(self, tolerance: float) -> float | None:
         """The attainable accuracy where the KKT corrections of one barrier stage have
         stopped decreasing near a feasible solution — the best of the last
-        :data:`STAGNATION` is not half the best of the ones before, all within 10⁴ of
+        ``options.stagnation`` is not half the best of the ones before, all within 10⁴ of
         the tolerance, the primal infeasibility below 1e-8 — else None (the
         near-bang–bang slew at N = 1000 hovered between 9e-9 and 4e-8 for 80 iterations,
         asked 2e-9)."""
-        c = self.corrections
-        if len(c) < 2 * STAGNATION or self.history["primal"][-1] > 1e-8:
+        c, n = self.corrections, self.options.stagnation
+        if len(c) < 2 * n or self.history["primal"][-1] > 1e-8:
             return None     # not near a solution: not rounding's doing
-        recent, before = min(c[-STAGNATION:]), min(c[-2 * STAGNATION:-STAGNATION])
-        attainable = max(c[-STAGNATION:])
+        recent, before = min(c[-n:]), min(c[-2 * n:-n])
+        attainable = max(c[-n:])
         if recent > 0.5 * before and attainable <= 1e4 * tolerance:
             return attainable
         return None
@@ -331,6 +340,14 @@ class InteriorPoint:
         self.history["primal"].append(max(eq, float(np.abs(c + self.s).max(initial=0.0))))
         self.history["dual"].append(dual)
         self.history["complementarity"].append(float((self.s * z).max(initial=0.0)))
+
+    def _report(self, it: int, status: Status | None) -> None:
+        """One line of ``verbose``: the iteration's barrier parameter and errors."""
+        verdict = f": {status.name}" if status is not None else ""
+        correction = f", KKT correction {self.corrections[-1]:.3e}" if self.corrections else ""
+        errors = f", {self._last_errors()}" if self.history["primal"] else ""
+        print(f"symvi: interior point: iteration {it}: barrier parameter {self.mu:.1e}"
+              f"{correction}{errors}{verdict}", file=sys.stderr, flush=True)
 
     def _last_errors(self) -> str:
         hist = self.history

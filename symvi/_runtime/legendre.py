@@ -9,7 +9,8 @@ continuous one (Marsden & West 2001, §1.5):
     F⁻L_d(x₀, f₀) = −D₁L_d(q₀, q₁) = ∂L/∂v (x₀, v₀),
 
 solved for f₀ by Newton's method on the compiled ``momentum_minus`` kernel and its
-Jacobian, from the explicit guess f₀ = q₀ + h v₀ (nodes) or f₀ = ξ₀ (increments). The path
+Jacobian, from the explicit guess f₀ = q₀ + h v₀ (nodes) or f₀ = ξ₀ (increments), per
+fibre coordinate as the package records (``INFO["fibre_nodes"]``). The path
 from there is the discrete flow of the momentum-matched initial condition, so it
 approximates the solution from (q₀, v₀) at the method's order whatever h is, which a
 fixed pair of nodes does not (it fixes the velocity at h/2 to (q₁ − q₀)/h).
@@ -20,6 +21,7 @@ import numpy as np
 
 from . import arguments
 from .geometry import check_base_points
+from .paths import initial_layout
 
 #: Newton iterations of the transform, and the relative size of a converged correction.
 MAXITER, XTOL = 30, 1e-14
@@ -36,12 +38,10 @@ class TransformError(ValueError):
 def state_arrays(model, state) -> tuple[np.ndarray, np.ndarray]:
     """The position x and velocity v of ``state``, checked (x on its manifold)."""
     if model.order != 1 or "legendre" not in model.info["kernels"]:
-        K = model.stencil_elements
-        what = (f"the first {K} nodes, an array ({K}, {model.n})" if model.info["node_pairs"]
-                else f"its first {K - 1} elements")
+        what = initial_layout(model).describe(model.stencil_elements, model.n)
         raise ValueError(f"model {model.name!r}: a State starts first-order models only "
                          f"(this one is of order {model.order}); give {what} instead")
-    if not (model.info["node_pairs"] or model.step_scaled.all()):
+    if not ((_fibre_nodes(model) >= 0) | model.step_scaled).all():
         raise ValueError(f"model {model.name!r}: a State needs every fibre coordinate to be "
                          f"a node (pair groupoid) or an increment (groups); give the first "
                          f"element instead")
@@ -61,7 +61,7 @@ def first_fibres(model, X: np.ndarray, V: np.ndarray, H: np.ndarray,
     c, n = len(X), model.n
     P = np.ascontiguousarray(P)
     momentum = _points(model, "legendre", np.hstack([X, V]), P, H)[0]
-    F = X + H[:, None] * V if model.info["node_pairs"] else V.copy()
+    F = guess(model, X, V, H)
     active = np.arange(c)
     for _ in range(MAXITER):
         value, jacobian = _points(model, "momentum_minus", np.hstack([X[active], F[active]]),
@@ -80,6 +80,23 @@ def first_fibres(model, X: np.ndarray, V: np.ndarray, H: np.ndarray,
     raise TransformError(f"the discrete Legendre transform from this state did not converge "
                          f"in {MAXITER} Newton iterations at h = {H[j]:g} (the velocity too "
                          f"large for the step?); take a smaller h or give the first element", j)
+
+
+def _fibre_nodes(model) -> np.ndarray:
+    """``INFO["fibre_nodes"]``: per fibre coordinate the base coordinate it copies at the
+    target node, or −1."""
+    return np.asarray(model.info["fibre_nodes"], dtype=int)
+
+
+def guess(model, X: np.ndarray, V: np.ndarray, H: np.ndarray) -> np.ndarray:
+    """The explicit first fibres of the states (X, V) at steps H: f_a = x_j + h v_a where
+    the fibre copies base coordinate j of the target node (the next node q₀ + h v₀),
+    f_a = v_a where it is an increment (ξ₀ = v₀)."""
+    nodes = _fibre_nodes(model)
+    copies = nodes >= 0
+    F = np.array(V, dtype=float, copy=True)
+    F[:, copies] = X[:, nodes[copies]] + H[:, None] * V[:, copies]
+    return F
 
 
 def _solve(J: np.ndarray, rhs: np.ndarray, active: np.ndarray, H: np.ndarray) -> np.ndarray:

@@ -6,10 +6,15 @@ C (``symvi_path_fibres``): a pair factor's fibre is the next node's coordinates,
 factor's is ξ = τ⁻¹(g_k⁻¹g_{k+1})/h. On an action groupoid the base points must follow
 the configurations, x_{k+1} = φ(x_k, g_k⁻¹g_{k+1}); :func:`check_consistent` says where
 they do not.
+
+A model's initial data for the step map come in the layout its groupoid names
+(``INFO["initial_layout"]``, :data:`INITIAL_LAYOUTS`): the first K nodes where an element
+is the pair of its nodes, else the first base point, configurations and fibres.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from typing import Any, Callable
 
 import numpy as np
 
@@ -272,4 +277,72 @@ def increments(model, g, h: float, params=None) -> np.ndarray:
                  arguments.step_size(h), lambda k: f"w_{k} = g_{k}⁻¹ g_{k + 1}")
     if isinstance(out, BVPResult):
         raise ValueError(out.message)
+    return out
+
+
+# -- initial data of the step map, in the layout the groupoid names ----------------------
+@dataclass(frozen=True)
+class InitialLayout:
+    """How initial data are given: ``read(model, initial)`` → the stencil prefix
+    (x_0, f_0, …, f_{K−2}) flattened and the configurations g_0 (:meth:`.compiled.
+    CompiledModel.initial_state`); ``describe(K, n)`` what to give, for messages."""
+
+    read: Callable[[Any, Any], tuple[np.ndarray, np.ndarray]]
+    describe: Callable[[int, int], str]
+
+
+def _read_nodes(model, initial) -> tuple[np.ndarray, np.ndarray]:
+    """The first K nodes, (K, n): an element is the pair of its nodes, so they are
+    x_0 = q_0 and the fibres f_j = q_{j+1} in a row."""
+    K = model.stencil_elements
+    nodes = arguments.finite_array(initial, (K, model.n),
+                                   f"initial nodes (the first {K} nodes q_0..q_{K - 1})")
+    return nodes.reshape(-1), np.zeros(1)
+
+
+def _read_elements(model, initial) -> tuple[np.ndarray, np.ndarray]:
+    """``(x_0, g_0, f)``: the first base point, the configurations of the matrix-group
+    factors (one (d, d) matrix, or a sequence of them; optional, identity by default)
+    and the first K−1 fibre parts; ``(g_0, f)`` without base points."""
+    K, m = model.stencil_elements, model.m
+    parts = list(initial) if isinstance(initial, (tuple, list)) else [initial]
+    x0 = [] if m == 0 else parts.pop(0) if parts else None
+    fibres = parts.pop() if parts else None
+    if fibres is None or len(parts) > 1:
+        layout = "(g_0, f)" if m == 0 else "(x_0, f) or (x_0, g_0, f)"
+        raise ValueError(f"initial data must be {layout}")
+    fibres = arguments.finite_array(fibres, (K - 1, model.n),
+                                    f"initial increments (the first {K - 1} fibre parts)")
+    x0 = arguments.finite_array(x0, (m,), "initial base point x_0")
+    check_base_points(model, x0[None, :], "initial base point x_0")
+    g0 = model.configuration(parts[0] if parts else None)
+    if model.matrix_dims:
+        check_configurations(model, g0[None, :], "initial configuration g_0")
+    return np.concatenate([x0, fibres.reshape(-1)]), g0
+
+
+#: The layouts of initial data, by the name a package records (``"nodes"`` where the
+#: groupoid says its elements are pairs of nodes, :mod:`symvi.groupoids.base`).
+INITIAL_LAYOUTS = {
+    "nodes": InitialLayout(_read_nodes, lambda K, n: f"the first {K} nodes, an array ({K}, {n})"),
+    "elements": InitialLayout(_read_elements, lambda K, n: f"its first {K - 1} elements"),
+}
+
+
+def initial_layout(model) -> InitialLayout:
+    """The layout of ``model``'s initial data."""
+    return INITIAL_LAYOUTS[model.info["initial_layout"]]
+
+
+def node_velocities(model, x: np.ndarray, f: np.ndarray, h: float) -> np.ndarray:
+    """The velocity of each element of a path (nodes x, fibres f), per fibre coordinate:
+    the difference quotient (x_{k+1, j} − x_{k, j})/h of the base coordinate j the fibre
+    copies at the target node (``INFO["fibre_nodes"]``: a pair factor), else the fibre
+    itself (ξ on a group)."""
+    nodes = np.asarray(model.info["fibre_nodes"], dtype=int)
+    copies = nodes >= 0
+    out = np.array(f, dtype=float, copy=True)
+    if copies.any():
+        x = np.asarray(x, dtype=float)[:len(out) + 1, nodes[copies]]
+        out[:, copies] = (x[1:] - x[:-1]) / h
     return out

@@ -2,7 +2,7 @@
 penalty on the violated inequalities, solved by the equality solver (issue 21).
 
 A cold bounded solve first solves the problem without its inequalities
-(:func:`.bvp._unbounded`) and starts the interior point at its optimum. Where that
+(:func:`.bounded.unbounded`) and starts the interior point at its optimum. Where that
 optimum violates them widely, the interior point may fail from there, and
 :func:`.bounded.bounded` retries from the start built here: a planar flyer whose unbounded optimum brakes with a forward-only
 thruster (f₁ < 0 on 107 of 199 windows) STALLED after 11 iterations — the fraction to
@@ -16,6 +16,10 @@ assembled by the barrier's elimination in C with z = ρ, s = 1, μ = 0) brings t
 violations to about 10⁻¹ and 5·10⁻³ of their scale on that flyer, from where the
 interior point converges in 16–18 iterations. Each stage is warm-started from the last;
 a stage that fails leaves the last start.
+
+The penalties of the stages are the solve's options
+(:attr:`.options.SolveOptions.penalty_stages`, then ``certifying_stages``); each stage is
+the Newton iteration of :mod:`.newton` under the solve's options.
 
 The same stages, continued tenfold at a time to ρ = 10⁸ h, tell an infeasible problem
 from a failed solve (:func:`infeasibility`): with feasible bounds the largest violation
@@ -34,13 +38,14 @@ import numpy as np
 
 from .assembly import Problem
 from .barrier import Inequalities
+from .newton import newton
+from .options import SolveOptions
 from .paths import Path
+from .results import Status
 
-#: The penalties ρ/h of the successive stages.
-STAGES = (1e2, 1e4)
-#: The stages after :data:`STAGES` that test infeasibility, and the factor by which the
-#: largest violation must fall per stage for the bounds to count as feasible.
-CERTIFYING, CONVERGED = (1e5, 1e6, 1e7, 1e8), 0.5
+#: The factor by which the largest violation must fall per certifying stage
+#: (:attr:`.options.SolveOptions.certifying_stages`) for the bounds to count as feasible.
+CONVERGED = 0.5
 #: A certifying stage counts where its node corrections are this small (relative).
 SETTLED = 1e-6
 
@@ -74,21 +79,18 @@ class PenalisedProblem(Problem):
             return cost + 0.5 * self.rho * float((excess * excess).sum()), noise
 
 
-def nearly_feasible(problem: Problem, path: Path, newton, maxiter: int,
-                    xtol: float) -> tuple[Path, int, int]:
+def nearly_feasible(problem: Problem, path: Path,
+                    options: SolveOptions) -> tuple[Path, int, int]:
     """(start, Newton iterations, stages solved): ``path`` (the optimum without
-    inequalities) moved by the penalty stages where it violates an inequality, else
-    unchanged. ``newton`` is :func:`.bvp._newton`."""
-    from .results import Status
-
+    inequalities) moved by the penalty stages (``options.penalty_stages``) where it
+    violates an inequality, else unchanged."""
     inequalities = Inequalities(problem.model, path.x.shape[0])
     if not inequalities.evaluate(path, problem.p, problem.h) or \
             not (inequalities.values > 0.0).any():
         return path, 0, 0
     count = solved = 0
-    for rho in STAGES:
-        moved, steps, status, _ = _stage(problem, inequalities, path, rho, newton, maxiter,
-                                         xtol)
+    for rho in options.penalty_stages:
+        moved, steps, status, _ = _stage(problem, inequalities, path, rho, options)
         count += steps
         if status != Status.SUCCESS:
             break
@@ -128,20 +130,18 @@ class Infeasibility:
                 f"lengthen the horizon, or try another guess (the certificate is local)")
 
 
-def infeasibility(problem: Problem, start: Path, newton, maxiter: int,
-                  xtol: float) -> tuple[Infeasibility | None, int]:
-    """(certificate or None, Newton iterations): the penalty stages :data:`CERTIFYING`
-    continued from ``start``, the last stage of :func:`nearly_feasible`; a certificate
+def infeasibility(problem: Problem, start: Path,
+                  options: SolveOptions) -> tuple[Infeasibility | None, int]:
+    """(certificate or None, Newton iterations): the penalty stages
+    ``options.certifying_stages`` continued from ``start``, the last stage of
+    :func:`nearly_feasible`; a certificate
     where the largest violation fell by less than :data:`CONVERGED` at every stage and
     stayed above rounding (module docstring). A stage solved only to ILL_CONDITIONED
     still counts: the violation needs no more digits."""
-    from .results import Status
-
     inequalities = Inequalities(problem.model, start.x.shape[0])
     violations, path, count = [_violation(inequalities, problem, start)], start, 0
-    for rho in CERTIFYING:
-        moved, steps, status, stage = _stage(problem, inequalities, path, rho, newton,
-                                             maxiter, xtol)
+    for rho in options.certifying_stages:
+        moved, steps, status, stage = _stage(problem, inequalities, path, rho, options)
         count += steps
         if status not in (Status.SUCCESS, Status.ILL_CONDITIONED) or \
                 not _settled(stage, moved):
@@ -151,16 +151,18 @@ def infeasibility(problem: Problem, start: Path, newton, maxiter: int,
         if not violations[-1] > max(CONVERGED * violations[-2], _floor(inequalities)):
             return None, count
     worst = np.unravel_index(int(np.argmax(inequalities.values)), inequalities.values.shape)
-    return Infeasibility(tuple(violations), (STAGES[-1],) + CERTIFYING,
+    return Infeasibility(tuple(violations),
+                         (options.penalty_stages[-1],) + options.certifying_stages,
                          (int(worst[0]), int(worst[1])), path), count
 
 
-def _stage(problem: Problem, inequalities: Inequalities, path: Path, rho: float, newton,
-           maxiter: int, xtol: float):
+def _stage(problem: Problem, inequalities: Inequalities, path: Path, rho: float,
+           options: SolveOptions):
     """(minimiser, Newton iterations, status, the stage's problem) of
-    S + ρh/2 Σ max(0, c)² from ``path``."""
+    S + ρh/2 Σ max(0, c)² from ``path`` (``options.ftol`` unused)."""
     stage = PenalisedProblem(problem, inequalities, rho * problem.h)
-    moved, _, steps, status, _ = newton(stage, path.copy(), maxiter, xtol, 0.0)
+    moved, _, steps, status, _ = newton(stage, path.copy(), options.replace(ftol=0.0),
+                                        f"penalty stage ρ = {rho:.0e} h")
     return moved, len(steps), status, stage
 
 

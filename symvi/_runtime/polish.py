@@ -38,14 +38,16 @@ import numpy as np
 
 from .paths import Path
 
-#: Most Newton steps per active set, and most active sets tried. Between active sets, as
-#: in a primal active-set method, the inequalities whose multipliers are negative leave
-#: (else the dropped ones found violated join), and Newton starts from the last converged
-#: point; where Newton does not converge on that set, the single most extreme change is
-#: tried instead (the cart-pole swing-up at N = 700: of three track windows active at the
-#: interior point's iterate one leaves, and dropping two at once diverged; a warm start of
-#: the torque-limited slew at τ_max = 11 → 11.2 at N = 1000: a dozen windows leave).
-STEPS, ROUNDS = 6, 8
+# The most Newton steps per active set and the most active sets tried are the solve's
+# options (``polish_steps``, ``polish_rounds``: :class:`.options.SolveOptions`, read from
+# the interior point's). Between active sets, as in a primal active-set method, the
+# inequalities whose multipliers are negative leave (else the dropped ones found violated
+# join), and Newton starts from the last converged point; where Newton does not converge
+# on that set, the single most extreme change is tried instead (the cart-pole swing-up at
+# N = 700: of three track windows active at the interior point's iterate one leaves, and
+# dropping two at once diverged; a warm start of the torque-limited slew at τ_max = 11 →
+# 11.2 at N = 1000: a dozen windows leave).
+
 #: Random directions of the rounding floor (:func:`_floor`).
 SAMPLES = 3
 
@@ -59,7 +61,7 @@ def polish(ip, path: Path, tolerance: float, active: np.ndarray | None = None):
         return None     # replaced rows of exactly dependent constraints: not this system
     active = (ip.z(path) > ip.s) if active is None else active
     total, single = 0, None
-    for _ in range(ROUNDS):
+    for _ in range(ip.options.polish_rounds):
         converged = _newton(ip, path, active, tolerance)
         if converged is None:
             if single is None:
@@ -98,7 +100,7 @@ def _newton(ip, path: Path, active: np.ndarray, tolerance: float):
     path = path.copy()
     path.lam[:, ip.s_count:] = np.where(active, ip.z(path), 0.0)
     within = False      # whether the last correction was within the tolerance
-    for step in range(STEPS):
+    for step in range(ip.options.polish_steps):
         newton = _correction(ip, path, active)
         if newton is None:
             return None

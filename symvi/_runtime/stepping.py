@@ -16,6 +16,7 @@ from typing import Mapping
 import numpy as np
 
 from . import arguments
+from .options import StepOptions
 from .results import State, Status, StepResult
 from .storage import Series, check_memory
 
@@ -39,9 +40,10 @@ BUFFER_STEPS = 2**16
 
 
 def integrate(model, initial, n_steps: int, h: float, params: Mapping[str, float] | None = None,
-              *, maxiter: int = 50,
-              xtol: float = 1e-12, ftol: float = 0.0, keep_every: int = 1,
-              quantities: bool = True, raise_on_failure: bool = False) -> StepResult:
+              *, maxiter: int = StepOptions.unset("maxiter"),
+              xtol: float = StepOptions.unset("xtol"), ftol: float = StepOptions.unset("ftol"),
+              keep_every: int = 1, quantities: bool = True, raise_on_failure: bool = False,
+              options: StepOptions | None = None, **keywords) -> StepResult:
     """Integrate ``n_steps`` steps of the discrete Euler–Lagrange equations.
 
     Parameters
@@ -71,6 +73,10 @@ def integrate(model, initial, n_steps: int, h: float, params: Mapping[str, float
         (True); False returns the path alone (those fields None), no work past the
         step loop: on the pendulum they take a fifth of the call's time.
     raise_on_failure : raise :class:`NewtonError` instead of returning a failed result.
+    options, keywords : the step's Newton options as one :class:`.options.StepOptions`
+        (or a mapping of its fields) instead of ``maxiter``, ``xtol``, ``ftol`` (an
+        options object and a keyword for one field are refused together); a keyword
+        that is not an option is refused by name with the list of the valid ones.
 
     A step whose Jacobian is singular (the step map is not defined there) fails with
     ``SINGULAR_JACOBIAN`` even where the residual vanishes, and a run whose path, momenta,
@@ -80,34 +86,37 @@ def integrate(model, initial, n_steps: int, h: float, params: Mapping[str, float
     within a few iterations instead of iterating to ``maxiter``. Ctrl-C stops a run
     within a fraction of a second (``KeyboardInterrupt``).
     """
-    return run_steps(model, initial, n_steps, h, params, maxiter, xtol, ftol, keep_every,
-                     raise_on_failure, quantities=quantities)
+    return run_steps(model, initial, n_steps, h, params, options, keep_every,
+                     raise_on_failure, quantities=quantities,
+                     keywords=dict(maxiter=maxiter, xtol=xtol, ftol=ftol) | keywords)
 
 
 class Stopped(Exception):
     """A run stopped between two chunks because its ``stop`` event was set."""
 
 
-def run_steps(model, initial, n_steps: int, h: float, params, maxiter: int, xtol: float,
-              ftol: float, keep_every: int, raise_on_failure: bool,
-              stop: threading.Event | None = None, quantities: bool = True) -> StepResult:
-    """:func:`integrate`, stopping (:class:`Stopped`) between two chunks once ``stop`` is
-    set: how a batch (:mod:`.batch`) ends its worker threads promptly."""
+def run_steps(model, initial, n_steps: int, h: float, params,
+              options: StepOptions | None, keep_every: int, raise_on_failure: bool,
+              stop: threading.Event | None = None, quantities: bool = True,
+              keywords: Mapping | None = None) -> StepResult:
+    """:func:`integrate` (``options`` and ``keywords`` as there), stopping
+    (:class:`Stopped`) between two chunks once ``stop`` is set: how a batch
+    (:mod:`.batch`) ends its worker threads promptly."""
     from_state, K = isinstance(initial, State), model.stencil_elements
     n_steps = step_count(model, n_steps)
     keep = arguments.count(keep_every, "keep_every", 1)
     h = arguments.step_size(h)
-    maxiter = arguments.iterations(maxiter)
-    xtol, ftol = arguments.tolerance(xtol, "xtol"), arguments.tolerance(ftol, "ftol")
+    options = StepOptions.of(options, keywords, "integrate")
     p = model.params(params)
     z0, g0 = model.initial_state(initial, h, p)
     new = n_steps - (K - 1)         # the initial elements are the first steps
     quantities = arguments.flag(quantities, "quantities")
     check_memory(model, n_steps, keep, BUFFER_STEPS if keep > 1 else 0, quantities)
     run = _Run(model, new, keep, p, h, stop, quantities)
-    code, steps, rnorm, iterations = run.loop(z0, g0, maxiter, xtol, ftol)
+    code, steps, rnorm, iterations = run.loop(z0, g0, options)
     status = Status(code)
-    message = outcome(status, n_steps, K, from_state, steps, h, maxiter, iterations, rnorm)
+    message = outcome(status, n_steps, K, from_state, steps, h, options.maxiter, iterations,
+                      rnorm)
     result = run.result(steps, status, message)
     return result.raise_for_status() if raise_on_failure else result
 
@@ -241,10 +250,9 @@ class _Run:
             self.g = np.zeros((K + steps if G else 1, max(G, 1)))
             self.iters = np.zeros(steps, np.intc)
 
-    def loop(self, z0, g0, maxiter: int, xtol: float,
-             ftol: float) -> tuple[int, int, float, int]:
-        """Run the chunks; returns (status code, steps done, last residual norm, Newton
-        iterations of the last step tried)."""
+    def loop(self, z0, g0, options: StepOptions) -> tuple[int, int, float, int]:
+        """Run the chunks, each step's Newton under ``options``; returns (status code,
+        steps done, last residual norm, Newton iterations of the last step tried)."""
         model, K = self.model, self.model.stencil_elements
         done, rnorm = model.ffi.new("long *"), model.ffi.new("double *")
         # the Newton iteration's state, carried from chunk to chunk (templates/stepper.c.j2)
@@ -258,8 +266,8 @@ class _Run:
             x, f, g = self.x[at:], self.f[at:], self.g[at:] if self.G else self.g
             began = time.perf_counter()
             code = model.lib.symvi_integrate(
-                model.ptr(z0), model.ptr(g0), size, model.ptr(self.p), self.h, maxiter, xtol,
-                ftol, model.ptr(x), model.ptr(f), model.ptr(g),
+                model.ptr(z0), model.ptr(g0), size, model.ptr(self.p), self.h, options.maxiter,
+                options.xtol, options.ftol, model.ptr(x), model.ptr(f), model.ptr(g),
                 model.ffi.from_buffer("int[]", self.iters[at:]), done, rnorm, carry)
             elapsed = time.perf_counter() - began
             finished = code != 0 or start + size == self.n_steps

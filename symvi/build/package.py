@@ -60,6 +60,19 @@ def python_literal(value: Any) -> str:
     return literal
 
 
+def fibre_nodes(dm: DerivedModel) -> list[int]:
+    """Per fibre coordinate: the base coordinate of the element's target node that it
+    copies (the C's ``node_copies``: a pair factor's f = q_{k+1}), or −1 (an increment
+    ξ = τ⁻¹(w)/h, or anything else). The run time reads a state (x, v) into a first
+    fibre through it, f_a = x_j + h·v_a or v_a (:mod:`._runtime.legendre`), and the
+    velocity of a path out of it (:mod:`symvi.plots`)."""
+    nodes = [-1] * dm.fibre_dim
+    for copy in dm.c_context.node_copies:
+        for k in range(copy.dim):
+            nodes[copy.f_offset + k] = copy.x_offset + k
+    return nodes
+
+
 def info(dm: DerivedModel, key: str, description: str) -> dict:
     """The ``INFO`` dict of the package: what the run-time needs to know of the model."""
     return {
@@ -67,7 +80,7 @@ def info(dm: DerivedModel, key: str, description: str) -> dict:
         "fibre_dim": dm.fibre_dim, "parameters": [str(s) for s in dm.parameters],
         "defaults": list(dm.defaults),
         "parameter_signs": [sign(s) for s in dm.parameters], "has_energy": dm.has_energy,
-        "node_pairs": dm.node_pairs,
+        "initial_layout": dm.initial_layout,
         "whole_trajectory": dm.whole_trajectory, "constraints": dm.constraint_count,
         "constraint_names": list(dm.constraint_names), "unactuated": list(dm.unactuated),
         "end_free": dm.end_free, "end_conditions": list(dm.end_names),
@@ -78,9 +91,10 @@ def info(dm: DerivedModel, key: str, description: str) -> dict:
         "symmetries": list(dm.symmetries), "gauges": list(dm.gauges),
         "lifted": bool(dm.fibre_sources),
         "symvi_version": __version__, "key": key,
-        "configuration_dim": dm.c_context["configuration_dim"],
-        "matrix_dims": [G["matrix_dim"] for G in dm.c_context["groups"]],
-        "groups": [{"label": G["label"], **G["invariants"]} for G in dm.c_context["groups"]],
+        "configuration_dim": dm.c_context.configuration_dim,
+        "matrix_dims": [G.matrix_dim for G in dm.c_context.groups],
+        "groups": [{"label": G.label, **G.invariants} for G in dm.c_context.groups],
+        "fibre_nodes": fibre_nodes(dm),
         "description": description,
         "kernels": {k.name: {"nz": len(k.z), "outputs": [len(M) for _, M in k.outputs]}
                     for k in dm.kernels},

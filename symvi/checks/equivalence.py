@@ -20,6 +20,7 @@ from sympy.core.function import AppliedUndef
 
 from ..discretisation.discretise import h as STEP
 from ..declaration.rank import generic_rank
+from ..derivation.differentiate import engine_function
 from ..groupoids.base import derivative_name
 from .series import vanishes_at
 from .spaces import Space
@@ -120,7 +121,8 @@ def matrix_rank(matrix: sp.Matrix, fixed: dict) -> int:
     """Generic rank of ``matrix`` at random points, ``fixed`` symbols at their values."""
     free = sorted(matrix.free_symbols - set(fixed), key=str)
     return generic_rank(matrix, free, {k: v for k, v in fixed.items()
-                                       if k in matrix.free_symbols}) or 0
+                                       if k in matrix.free_symbols},
+                        engine=engine_function) or 0
 
 
 def linear_unknowns(exprs, candidates, fixed) -> list | None:

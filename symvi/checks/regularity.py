@@ -19,6 +19,7 @@ import sympy as sp
 from ..derivation.derive import step_jacobian
 from ..errors import ModelError
 from ..declaration.rank import generic_rank, sequential_lambdify
+from ..derivation.differentiate import engine_function
 from .budget import SKIPPED
 from .noether import readable
 from .report import CheckResult
@@ -75,7 +76,8 @@ def run(ctx) -> CheckResult:
     J, st = _matrix(ctx)
     fixed = dict(zip(dm.parameters, dm.defaults)) | {dm.step: _STEP}
     n = J.shape[0]
-    rank = generic_rank(J, st.z, fixed, definitions=st.definitions, seed=ctx.seed)
+    rank = generic_rank(J, st.z, fixed, definitions=st.definitions, seed=ctx.seed,
+                        engine=engine_function)
     what = "bordered step matrix" if dm.constraints else \
         dm.groupoid.step_matrix_name(dm.order)
     names = readable(st, dm.groupoid)

@@ -7,8 +7,9 @@ templates. Common subexpressions are eliminated once over all outputs of a kerne
 from __future__ import annotations
 
 import hashlib
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Sequence
 
 import jinja2
 import sympy as sp
@@ -19,6 +20,7 @@ from ..version import __version__
 from ..derivation.derive import DerivedModel, Kernel
 from ..errors import ModelError
 from ..groupoids.analytic import THETA, AnalyticCoefficient, c_definition
+from ..groupoids.base import GroupFactor
 from .schedule import SPLIT_ABOVE, Statement, on_demand, split
 
 #: Kernels of more statements than this are compiled as translation units of their own,
@@ -176,8 +178,9 @@ def emit(dm: DerivedModel) -> CSource:
         "fibre_sources": list(dm.fibre_sources),
         "coefficients": [c_definition(c, ArrayPrinter({THETA: "theta"}))
                          for c in dm.coefficients],
-        **dm.c_context,
-        "groups": _with_configuration_offsets(dm.c_context["groups"]),
+        "configuration_dim": dm.c_context.configuration_dim,
+        "node_copies": list(dm.c_context.node_copies),
+        "groups": _with_configuration_offsets(dm.c_context.groups),
     }
     c_source = env.get_template("module.c.j2").render(**context)
     cdef = env.get_template("cdef.h.j2").render(**context)
@@ -190,13 +193,13 @@ def emit(dm: DerivedModel) -> CSource:
     return CSource(c_source, cdef, digest, units)
 
 
-def _with_configuration_offsets(groups: list[dict]) -> list[dict]:
+def _with_configuration_offsets(groups: Sequence[GroupFactor]) -> list[GroupFactor]:
     """Each group factor with ``g_offset``, where its d×d block starts in a node's
     configuration (the factors' matrices, concatenated)."""
     out, at = [], 0
     for G in groups:
-        out.append(G | {"g_offset": at})
-        at += G["matrix_dim"] ** 2
+        out.append(replace(G, g_offset=at))
+        at += G.matrix_dim ** 2
     return out
 
 

@@ -16,14 +16,38 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import sympy as sp
 
-from .._runtime.arguments import SIGNS
+from .._runtime.signs import SIGNS
 from .symbols import h, sign
 from ..errors import ModelError
-from ..discretisation.rules import MAX_ORDER
 from ..groupoids.base import Groupoid, step_matrix
 from .rank import generic_rank
 from .symmetry import Symmetry
 from .validation import NOT_NUMBERS, check_model_name, check_smooth, scalar
+
+#: The highest order :func:`_named_orders` asks a groupoid about past its own: a guard
+#: against a groupoid without a highest derivative, far above the rules' (6).
+_ORDER_SEARCH_LIMIT = 32
+
+
+def _named_orders(g: Groupoid, unexplained: set[sp.Symbol]):
+    """(k, the set of ``g.leading_symbols(k)``) for k = 2, 3, …: every order up to the
+    groupoid's own, then higher ones while some of the ``unexplained`` symbols (a
+    Lagrangian's symbols of no order ``g`` takes) are not found among them, until the
+    groupoid names no derivatives of order k (the groupoids name them up to the rules'
+    highest order, :data:`symvi.discretisation.rules.MAX_ORDER`). A groupoid that names
+    derivatives of every order (none of symvi's does) is asked up to
+    :data:`_ORDER_SEARCH_LIMIT`."""
+    unexplained = set(unexplained)
+    k = 2
+    while k <= g.max_order or (unexplained and k <= _ORDER_SEARCH_LIMIT):
+        try:
+            leading = set(g.leading_symbols(k))
+        except ModelError:
+            return
+        unexplained -= leading
+        yield k, leading
+        k += 1
+
 
 @dataclass(frozen=True)
 class Example:
@@ -230,9 +254,9 @@ class Model:
         # past the groupoid's orders only symbols it has no use for count (a groupoid
         # written for orders 1 and 2 may answer any other order with its first-order ones)
         own = set(g.continuous_symbols(g.max_order))
-        needed = max((k for k in range(2, MAX_ORDER + 1)
-                      if set(g.leading_symbols(k)) & L.free_symbols
-                      and (k <= g.max_order or not set(g.leading_symbols(k)) <= own)),
+        unexplained = L.free_symbols - own - set(self.parameter_symbols)
+        needed = max((k for k, leading in _named_orders(g, unexplained)
+                      if leading & L.free_symbols and (k <= g.max_order or not leading <= own)),
                      default=1)
         top = [str(s) for s in g.leading_symbols(needed) if s in L.free_symbols]
         if needed > g.max_order:

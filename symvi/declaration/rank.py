@@ -18,16 +18,20 @@ exactly zero has rank 0.
 """
 from __future__ import annotations
 
-from typing import Sequence
+from typing import Callable, Sequence
 
 import numpy as np
-import symengine as se
 import sympy as sp
 
 from ..groupoids.analytic import used_coefficients
 
 #: Singular values below this fraction of a sample's scale count as zero.
 RELATIVE_TOLERANCE = 1e-10
+
+#: A compiler of a matrix as a NumPy function of ``args``, or None where it cannot take
+#: the matrix: ``engine(args, definitions, matrix)`` (see :func:`generic_rank`).
+Engine = Callable[[Sequence[sp.Symbol], Sequence[tuple[sp.Symbol, sp.Expr]], sp.Matrix],
+                  Callable | None]
 
 
 def sequential_lambdify(args: Sequence[sp.Symbol],
@@ -55,48 +59,23 @@ def sequential_lambdify(args: Sequence[sp.Symbol],
                        cse=with_definitions)
 
 
-def engine_function(args: Sequence[sp.Symbol], definitions: Sequence[tuple[sp.Symbol, sp.Expr]],
-                    matrix: sp.Matrix):
-    """The function of :func:`sequential_lambdify` through SymEngine's ``Lambdify`` (C++,
-    its own common subexpressions): on the 20-link chain's step Jacobian 0.3 s where
-    SymPy's ``lambdify`` took 6 s. The definitions are substituted into the matrix on the
-    SymEngine side (shared subtrees stay shared). None where SymEngine cannot take the
-    expressions or they hold analytic coefficients (which it cannot evaluate): then
-    :func:`sequential_lambdify` is used."""
-    from ..derivation.differentiate import _UNTRANSLATABLE, _Translation
-
-    try:
-        t = _Translation()
-        values = t.engine(sp.Matrix([e for _, e in definitions] + list(matrix)))
-        if t.applications:
-            return None
-        defined = [t.stand_in(s) for s, _ in definitions]
-        exprs = list(values)[len(definitions):]
-        for symbol, value in reversed(list(zip(defined, values))):
-            exprs = [e.xreplace({symbol: value}) for e in exprs]
-        f = se.Lambdify([t.stand_in(a) for a in args], exprs, real=True, cse=True)
-    except _UNTRANSLATABLE:
-        return None
-    shape = matrix.shape
-
-    def evaluate(*point):
-        return np.asarray(f(np.asarray(point, dtype=float)), dtype=float).reshape(shape)
-    return evaluate
-
-
 def generic_rank(matrix: sp.Matrix, symbols: Sequence[sp.Symbol],
                  fixed: dict[sp.Symbol, float] | None = None, samples: int = 4,
-                 seed: int = 20261121, definitions=()) -> int | None:
+                 seed: int = 20261121, definitions=(), engine: Engine | None = None
+                 ) -> int | None:
     """Largest numerical rank of ``matrix`` over random points of ``symbols``.
 
     ``fixed`` gives values for the remaining symbols (parameters, the step);
     ``definitions`` intermediate quantities ``matrix`` may use (see
-    :func:`sequential_lambdify`). Returns None when no sample point gave finite entries
-    or the matrix holds a function NumPy cannot evaluate.
+    :func:`sequential_lambdify`). ``engine``, when given, compiles the matrix first
+    (the derivation hands its :func:`symvi.derivation.differentiate.engine_function`,
+    SymEngine's ``Lambdify``, for its large step Jacobians); where it gives None, or
+    without one, :func:`sequential_lambdify` does. Returns None when no sample point gave
+    finite entries or the matrix holds a function NumPy cannot evaluate.
     """
     fixed = dict(fixed or {})
     args = list(symbols) + list(fixed)
-    f = engine_function(args, definitions, matrix) \
+    f = (engine and engine(args, definitions, matrix)) \
         or sequential_lambdify(args, definitions, matrix)
     sizes = None     # compiled when a sample first needs it
     rng = np.random.default_rng(seed)

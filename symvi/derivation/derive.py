@@ -32,8 +32,10 @@ import sympy as sp
 from ..discretisation.discretise import DiscreteModel
 from ..errors import ModelError
 from ..groupoids.analytic import used_coefficients
+from ..groupoids.base import CContext
 from ..declaration.rank import generic_rank
-from .differentiate import _UNTRANSLATABLE, _Translation, gradient, gradient_and_hessian, jacobian
+from .differentiate import (_UNTRANSLATABLE, _Translation, engine_function, gradient,
+                            gradient_and_hessian, jacobian)
 
 
 @dataclass(frozen=True)
@@ -70,11 +72,11 @@ class DerivedModel:
     kernels: tuple[Kernel, ...]
     whole_trajectory: bool
     has_energy: bool
-    #: Whether an element is the pair of its end nodes (the pair groupoid): initial data
-    #: and boundary data are then nodes (:attr:`Groupoid.elements_are_node_pairs`).
-    node_pairs: bool
+    #: How initial data are laid out: "nodes" or "elements"
+    #: (:meth:`Groupoid.initial_layout`).
+    initial_layout: str
     fingerprint: str
-    c_context: dict
+    c_context: CContext
     #: Analytic coefficient functions (exponential retraction) the C must define.
     coefficients: tuple = ()
     #: Number s of constraints per window (multipliers λ^k ∈ R^s) and of controls.
@@ -584,8 +586,8 @@ def _legendre(dm: DiscreteModel, r: int) -> list[Kernel]:
     L = dm.continuous_lagrangian
     if r != 1 or L is None:
         return []
-    symbols = tuple(dm.groupoid.continuous_symbols(1))
-    velocity = symbols[len(symbols) - dm.groupoid.fibre_dim:]
+    base, velocity = dm.groupoid.state_symbols()
+    symbols = (*base, *velocity)
     momentum = sp.Matrix([sp.diff(L, v) for v in velocity])
     return [Kernel("legendre", symbols, (("momentum", momentum),),
                    "∂L/∂v at a state (base coordinates, velocity)", along=False)]
@@ -639,7 +641,8 @@ def _check_regular(dm: DiscreteModel, step: Kernel) -> None:
     jac = dict(step.outputs)["jacobian"]
     rng = np.random.default_rng(7)
     fixed = dict(zip(dm.parameters, dm.defaults)) | {dm.step: float(rng.uniform(0.05, 0.2))}
-    rank, n = generic_rank(jac, step.z, fixed, definitions=step.definitions), jac.shape[0]
+    rank = generic_rank(jac, step.z, fixed, definitions=step.definitions, engine=engine_function)
+    n = jac.shape[0]
     if rank is not None and rank < n:
         which = dm.groupoid.step_matrix_name(dm.order)
         raise ModelError(
@@ -648,29 +651,53 @@ def _check_regular(dm: DiscreteModel, step: Kernel) -> None:
             f"Lagrangian does not define a step map (is the Lagrangian degenerate?)")
 
 
-#: Derived models kept in memory, by fingerprint: a model derived again in one process (a
-#: forced rebuild, a symbolic check of a compiled model) is derived once.
-MEMO_SIZE = 32
-_MEMO: OrderedDict[str, DerivedModel] = OrderedDict()
-_MEMO_LOCK = threading.Lock()
+class DerivationCache:
+    """Derived models kept in memory by fingerprint, the ``size`` most recently used:
+    a model derived again in one process (a forced rebuild, a symbolic check of a
+    compiled model) is derived once. Its own lock makes it safe to share between threads
+    (the builds of a batch of models); a derivation runs outside the lock, so two threads
+    asking for one new model may both derive it (the result is the same)."""
+
+    def __init__(self, size: int = 32):
+        self.size = size
+        self._models: OrderedDict[str, DerivedModel] = OrderedDict()
+        self._lock = threading.Lock()
+
+    def get(self, fingerprint: str) -> DerivedModel | None:
+        """The model derived under ``fingerprint``, now the most recently used; or None."""
+        with self._lock:
+            if fingerprint not in self._models:
+                return None
+            self._models.move_to_end(fingerprint)
+            return self._models[fingerprint]
+
+    def put(self, fingerprint: str, derived: DerivedModel) -> None:
+        """Keep ``derived``, forgetting the least recently used beyond :attr:`size`."""
+        with self._lock:
+            self._models[fingerprint] = derived
+            while len(self._models) > self.size:
+                self._models.popitem(last=False)
 
 
-def derive(dm: DiscreteModel) -> DerivedModel:
+#: The cache :func:`derive` uses unless handed another: the one every caller in a process
+#: shares by default (the build, the checks, the test session, which enlarges it), passed
+#: as :func:`derive`'s default argument. A caller that wants derivations of its own (or
+#: none kept: ``DerivationCache(0)``) passes its own.
+PROCESS_CACHE = DerivationCache()
+
+
+def derive(dm: DiscreteModel, cache: DerivationCache = PROCESS_CACHE) -> DerivedModel:
     """Derive every kernel of ``dm`` and check that its step map is regular.
 
     Constrained models have no step map (they are solved as whole trajectories); their
     regularity is that of the bordered Hessian, checked on the continuous model. The
-    result depends on ``dm.fingerprint`` only, and the last :data:`MEMO_SIZE` are kept.
+    result depends on ``dm.fingerprint`` only: ``cache`` (:class:`DerivationCache`) keeps
+    it for the next call with the same fingerprint.
     """
-    with _MEMO_LOCK:
-        if dm.fingerprint in _MEMO:
-            _MEMO.move_to_end(dm.fingerprint)
-            return _MEMO[dm.fingerprint]
-    derived = _derive(dm)
-    with _MEMO_LOCK:
-        _MEMO[dm.fingerprint] = derived
-        while len(_MEMO) > MEMO_SIZE:
-            _MEMO.popitem(last=False)
+    derived = cache.get(dm.fingerprint)
+    if derived is None:
+        derived = _derive(dm)
+        cache.put(dm.fingerprint, derived)
     return derived
 
 
@@ -696,7 +723,7 @@ def _derive(dm: DiscreteModel) -> DerivedModel:
                         fibre_dim=g.fibre_dim, parameters=dm.parameters, defaults=dm.defaults,
                         step=dm.step, kernels=kernels, whole_trajectory=g.whole_trajectory,
                         has_energy=dm.order == 1, fingerprint=dm.fingerprint,
-                        node_pairs=g.elements_are_node_pairs,
+                        initial_layout=g.initial_layout,
                         constraint_count=len(dm.constraints), control_count=len(dm.controls),
                         constraint_names=dm.constraint_names, unactuated=dm.unactuated,
                         end_free=dm.end_free, end_names=dm.end_names,

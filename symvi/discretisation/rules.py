@@ -4,28 +4,32 @@ A rule turns a continuous Lagrangian into L_d = h Σ w_i L(point_i) on a window 
 slots (x_j, f_j), each point a substitution of the groupoid's continuous symbols. The
 quadrature reads the window through the groupoid's own coordinates — the nodes of a pair
 groupoid (``window_nodes``, ``point``), the Lie algebra point and base points of a group
-or action groupoid (``algebra_point``, ``base_point``), a product's factors
-(``factor_slots``) — so a rule applies to the groupoids that give them, and each groupoid
-lists its rules (:meth:`~symvi.groupoids.base.Groupoid.rules`; the first is the default).
+or action groupoid (``algebra_point``, ``base_quadrature``), a product's factors
+(``factors``, ``factor_slots``) — hooks every :class:`~symvi.groupoids.base.Groupoid`
+declares — so a rule applies to the groupoids that give them, and each groupoid lists its
+rules (:meth:`~symvi.groupoids.base.Groupoid.rules`; the first is the default). A rule
+asks the groupoid, never which kind it is.
 """
 from __future__ import annotations
 
 import functools
 import itertools
 from dataclasses import dataclass, field
-from typing import Any, Callable, Sequence
+from typing import TYPE_CHECKING, Callable, Sequence
 
 import sympy as sp
 from sympy.calculus.finite_diff import finite_diff_weights
+
+if TYPE_CHECKING:       # for annotations only: the groupoids import this module
+    from ..groupoids.base import Groupoid
 
 #: The highest order of a Lagrangian (the number of slots of L_d) that the rules here
 #: discretise: L(q, q̇, …, q⁽ᵏ⁾) on a pair groupoid, L(ξ, …, ξ⁽ᵏ⁻¹⁾) on a Lie group.
 MAX_ORDER = 6
 
 Points = list[tuple[sp.Expr, dict]]
-#: (groupoid, xs, fs, h) → weighted points. The groupoid is typed loosely: it is whichever
-#: groupoid lists the rule, and this module must not import the groupoids (they import it).
-Quadrature = Callable[[Any, Sequence, Sequence, sp.Expr], Points]
+#: (groupoid, xs, fs, h) → weighted points, the groupoid being whichever lists the rule.
+Quadrature = Callable[["Groupoid", Sequence, Sequence, sp.Expr], Points]
 
 
 @dataclass(frozen=True)
@@ -43,29 +47,29 @@ class Rule:
     quadrature: Quadrature = field(repr=False, compare=False)
     consistency_order: int = 2
 
-    def applies_to(self, groupoid: Any) -> bool:
+    def applies_to(self, groupoid: Groupoid) -> bool:
         return self in groupoid.rules(self.order)
 
-    def build(self, groupoid: Any, L: sp.Expr, xs, fs, step: sp.Expr) -> sp.Expr:
+    def build(self, groupoid: Groupoid, L: sp.Expr, xs, fs, step: sp.Expr) -> sp.Expr:
         """L_d = h Σ w_i L(point_i) on the window (xs, fs)."""
         return step * self.average(groupoid, L, xs, fs, step)
 
-    def average(self, groupoid: Any, F: sp.Expr, xs, fs, step: sp.Expr) -> sp.Expr:
+    def average(self, groupoid: Groupoid, F: sp.Expr, xs, fs, step: sp.Expr) -> sp.Expr:
         """Σ w_i F(point_i): the quadrature's weighted mean of F over one window."""
         return sum(w * F.xreplace(point) for w, point in self.quadrature(groupoid, xs, fs, step))
 
 
 # -- pair groupoid: the nodes q_0, q_1, … of the window ----------------------------------
-def _nodes(g, xs, fs) -> list[sp.Matrix]:
+def _nodes(g: Groupoid, xs, fs) -> list[sp.Matrix]:
     return [sp.Matrix(n) for n in g.window_nodes(xs, fs)]
 
 
-def _midpoint(g, xs, fs, h) -> Points:
+def _midpoint(g: Groupoid, xs, fs, h) -> Points:
     q0, q1 = _nodes(g, xs, fs)
     return [(sp.Integer(1), g.point((q0 + q1) / 2, (q1 - q0) / h))]
 
 
-def _trapezoid(g, xs, fs, h) -> Points:
+def _trapezoid(g: Groupoid, xs, fs, h) -> Points:
     q0, q1 = _nodes(g, xs, fs)
     v = (q1 - q0) / h
     return [(sp.S.Half, g.point(q0, v)), (sp.S.Half, g.point(q1, v))]
@@ -93,39 +97,35 @@ def window_derivatives(samples: Sequence[sp.Matrix], first: sp.Rational,
             for j, row in enumerate(rows)]
 
 
-def _central(g, xs, fs, h) -> Points:
+def _central(g: Groupoid, xs, fs, h) -> Points:
     """L(q, q̇, …, q⁽ᵏ⁾) at the window's centre, kh/2, from the polynomial through its
     k + 1 nodes (k = 2: q₁, (q₂ − q₀)/2h, (q₂ − 2q₁ + q₀)/h²)."""
     return [(sp.Integer(1), g.point(*window_derivatives(_nodes(g, xs, fs), sp.S.Zero, h)))]
 
 
-def _three_point(g, xs, fs, h) -> Points:
+def _three_point(g: Groupoid, xs, fs, h) -> Points:
     q0, q1, q2 = _nodes(g, xs, fs)
     return [(sp.Integer(1), g.point((q0 + q1 + q2) / 3, (q2 - q0) / (2 * h),
                                     (q2 - 2 * q1 + q0) / h**2))]
 
 
 # -- Lie groups and action groupoids: ξ (and ξ̇) from the increments ---------------------
-def _lie(g, xs, fs, h) -> Points:
+def _lie(g: Groupoid, xs, fs, h) -> Points:
     """h l(ξ) on a Lie group; on an action groupoid the trapezoid in the base,
-    h/2 [l(q_0, ξ) + l(q_1, ξ)] (symmetric, order 2). A base point after the element, when
-    given (``len(xs) > len(fs)``), is its target instead of β(x, f), so that derivatives
-    can go through it by the chain rule."""
+    h/2 [l(q_0, ξ) + l(q_1, ξ)] (symmetric, order 2): the groupoid's
+    :meth:`~symvi.groupoids.base.Groupoid.base_quadrature`."""
     algebra = g.algebra_point(fs, h)
-    if not g.source_dim:                 # a Lie group has no base to average over
-        return [(sp.Integer(1), algebra)]
-    q1 = xs[1] if len(xs) > len(fs) else g.target(xs[0], fs[0], h)
-    return [(sp.S.Half, g.base_point(xs[0]) | algebra), (sp.S.Half, g.base_point(q1) | algebra)]
+    return [(w, base | algebra) for w, base in g.base_quadrature(xs, fs, h)]
 
 
-def _lie_midpoint(g, xs, fs, h) -> Points:
+def _lie_midpoint(g: Groupoid, xs, fs, h) -> Points:
     """L((ξ_0 + ξ_1)/2, (ξ_1 − ξ_0)/h) (paper eq. ``sdfinal``), on an action groupoid at
     the base point of the middle node."""
     return [(sp.Integer(1), g.base_point(xs[1]) | g.algebra_point(fs, h))]
 
 
 # -- products: the tensor product of the factors' default rules ------------------------
-def _product(g, xs, fs, h) -> Points:
+def _product(g: Groupoid, xs, fs, h) -> Points:
     order = len(fs)
     per_factor = [factor.rules(order)[0].quadrature(factor, fx, ff, h)
                   for factor, (fx, ff) in zip(g.factors, g.factor_slots(xs, fs))]

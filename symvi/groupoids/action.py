@@ -19,7 +19,7 @@ import numpy as np
 import sympy as sp
 
 from ..errors import ModelError
-from .base import Algebroid, Groupoid, _shape
+from .base import Algebroid, CContext, Groupoid, _shape
 from .lie import MatrixLieGroup, _symbol_names
 
 Action = Callable[[sp.Matrix, sp.Matrix], Sequence[sp.Expr]]
@@ -252,11 +252,8 @@ class ActionGroupoid(Groupoid):
     def equation_setting(self, order):
         return "on the action algebroid"
 
-    def c_context(self) -> dict:
-        return {"configuration_dim": self.group.matrix_dim ** 2,
-                "groups": [self.group.group_context(0)],
-                "factors": [{"kind": "group", "group": 0, "f_offset": 0,
-                             "dim": self.fibre_dim}]}
+    def c_context(self) -> CContext:
+        return CContext(self.group.matrix_dim ** 2, (self.group.group_context(0),))
 
     def coefficient_functions(self) -> list:
         return self.group.coefficient_functions()

@@ -15,19 +15,42 @@ rank of the algebroid AG). A groupoid supplies only
 
 Everything else (discrete Euler–Lagrange residuals of any order, momenta, Jacobians) is
 built from these by :mod:`symvi.derivation.derive`, so a new groupoid is a new subclass only.
+
+The contract, in one place (everything the engine, the rules, the templates and the run
+time call on a groupoid is declared here):
+
+1. Abstract — every groupoid gives them: ``source_dim``, ``fibre_dim``, ``target``,
+   ``right``, ``left``, ``continuous_symbols``, ``leading_symbols``, ``rules``,
+   ``discrete_symbols``, ``discrete_mapping``, ``predictor``, ``fingerprint``.
+2. What its rules read (:mod:`symvi.discretisation.rules`; a rule applies to the
+   groupoids that give what it reads, each groupoid lists its rules): ``window_nodes``
+   and ``point`` (node rules), ``algebra_point``, ``base_point`` and ``base_quadrature``
+   (increment rules), ``factors`` and ``factor_slots`` (product rules).
+3. Hooks with defaults: ``algebroid``, ``state_symbols``, ``step_scaled``, ``move``
+   (with ``whole_trajectory``), ``manifold``, ``c_context`` (a :class:`CContext`: the C
+   of the group factors and of the fibres that copy nodes), ``coefficient_functions``,
+   ``fibre_nodes``, ``initial_layout``, ``check_initial``, ``default_discretisation``,
+   ``rule``, ``derivative``; for the checks ``identity``, ``multiply``, ``inverse``,
+   ``basis_curve``, ``fibre_sampling``, ``component_names``, ``matrix_groups``,
+   ``equation_setting``, ``step_matrix_name``, ``preserved_structure``.
+4. Flags and data (class attributes): ``kind`` (a label for messages and metadata, never
+   branched on outside this package), ``names``, ``max_order``, ``whole_trajectory``,
+   ``elements_are_node_pairs`` (a path is its nodes: initial data in the ``"nodes"``
+   layout, the checks' expansions in q, q̇, …), ``sampling_text``, ``structure_check``.
 """
 from __future__ import annotations
 
 import operator
 from abc import ABC, abstractmethod
-from dataclasses import dataclass
+from dataclasses import dataclass, field, replace
 from typing import Sequence
 
 import numpy as np
 import sympy as sp
 
 from ..errors import ModelError
-from ..discretisation.rules import RULES, Rule, rule_names
+from ..discretisation.rules import RULES, Points, Rule, rule_names
+from .retraction import RetractionC
 
 
 def derivative_name(name: str, k: int) -> str:
@@ -105,15 +128,69 @@ def block_algebroid(parts: Sequence[Algebroid]) -> Algebroid:
                      tuple(s for a in parts for s in a.ydot), anchor, tuple(structure))
 
 
+@dataclass(frozen=True)
+class NodeCopy:
+    """Fibre coordinates f[f_offset : f_offset + dim] that are the element's target node's
+    base coordinates x[x_offset : x_offset + dim] (a pair factor: the element is the pair
+    of its nodes). The C copies them (``templates/fibres.c.j2``); the run time maps a
+    state (x, v) to such a fibre as x + h v (``INFO["fibre_nodes"]``)."""
+
+    x_offset: int
+    f_offset: int
+    dim: int
+
+
+@dataclass(frozen=True)
+class GroupFactor:
+    """One matrix-group factor for ``templates/group.c.j2`` and ``retractions.c.j2``: its ξ
+    starts at f[offset], its d×d configuration at g[g_offset] of a node
+    (:func:`symvi.codegen.emit`), ``invariants`` what the run time checks of it
+    (:meth:`MatrixLieGroup.invariants`), ``retraction`` the C of its retraction."""
+
+    label: str
+    matrix_dim: int
+    dim: int
+    offset: int
+    invariants: dict
+    basis: list
+    dual: list
+    retraction: RetractionC
+    g_offset: int = 0
+
+
+@dataclass(frozen=True)
+class CContext:
+    """What the C templates need of a groupoid beyond its kernels: the configuration
+    reconstructed along a path (Σ d² numbers over ``groups``), the matrix-group factors
+    and the fibre coordinates that copy the target node (``node_copies``). The templates
+    loop over these; they never ask which kind of groupoid made them."""
+
+    configuration_dim: int = 0
+    groups: tuple[GroupFactor, ...] = ()
+    node_copies: tuple[NodeCopy, ...] = field(default=())
+
+    def shifted(self, x_offset: int, f_offset: int) -> "CContext":
+        """The same factors inside a product, whose sources start at ``x_offset`` and
+        fibres at ``f_offset``."""
+        return CContext(self.configuration_dim,
+                        tuple(replace(G, offset=G.offset + f_offset) for G in self.groups),
+                        tuple(NodeCopy(c.x_offset + x_offset, c.f_offset + f_offset, c.dim)
+                              for c in self.node_copies))
+
+
 class Groupoid(ABC):
     """A Lie groupoid in coordinates; see the module docstring for the contract."""
 
-    #: Short name of the groupoid kind, stored in generated modules' metadata.
+    #: Short name of the groupoid kind, stored in generated modules' metadata and shown
+    #: in messages; nothing outside :mod:`symvi.groupoids` branches on it (layout test).
     kind: str = "abstract"
     #: The highest order of Lagrangian declared on this groupoid (the number of slots of
     #: its L_d): 2 unless a groupoid's rules and symbols go further (at most
     #: :data:`symvi.discretisation.rules.MAX_ORDER`).
     max_order: int = 2
+    #: Names of the coordinates (a pair groupoid's, a Lie algebra's), for symbols and
+    #: messages; the checks' jets of a groupoid whose elements are node pairs use them.
+    names: tuple[str, ...] = ()
 
     @property
     @abstractmethod
@@ -137,6 +214,12 @@ class Groupoid(ABC):
     @abstractmethod
     def left(self, x: Sequence[sp.Expr], f: Sequence[sp.Expr], h: sp.Expr) -> sp.Matrix:
         """(m+n)×n matrix: column a is d/dε (x, f)(σ_a(ε)⁻¹·g) at ε = 0."""
+
+    def derivative(self, j: int) -> tuple[sp.Symbol, ...]:
+        """The symbols of the j-th time derivative of the coordinates (q⁽ʲ⁾ on a pair
+        groupoid, ξ⁽ʲ⁾ on a Lie group: :func:`derivative_name`), for declaring
+        Lagrangians of higher order and for the checks' jets."""
+        raise NotImplementedError(f"{self!r} does not name the derivatives of its coordinates")
 
     @abstractmethod
     def continuous_symbols(self, order: int) -> tuple[sp.Symbol, ...]:
@@ -173,6 +256,47 @@ class Groupoid(ABC):
         """
         return (False,) * self.fibre_dim
 
+    # -- what the rules read (symvi.discretisation.rules) ---------------------------------
+    # A rule applies to the groupoids that list it in ``rules``; each reads the window
+    # through the hooks below that its kind of quadrature needs, so a groupoid gives
+    # those of the rules it lists and may leave the others.
+    def window_nodes(self, xs: Sequence[Sequence[sp.Expr]],
+                     fs: Sequence[Sequence[sp.Expr]]) -> list[tuple[sp.Expr, ...]]:
+        """The nodes q_0, q_1, … of a window of consecutive elements (x_j, f_j), for rules
+        that interpolate nodes (``midpoint``, ``trapezoid``, ``three_point``,
+        ``central<k>``)."""
+        raise NotImplementedError(f"{self!r} has no nodes for node rules")
+
+    def point(self, *derivatives: Sequence[sp.Expr]) -> dict:
+        """The substitution of the continuous symbols q, q̇, … by ``derivatives``: one
+        quadrature point of a node rule."""
+        raise NotImplementedError(f"{self!r} has no quadrature points for node rules")
+
+    def algebra_point(self, fs: Sequence[Sequence[sp.Expr]], h: sp.Expr) -> dict:
+        """The substitution of ξ, ξ̇, …, ξ⁽ᵏ⁻¹⁾ from the increments of a window of k
+        elements (rules ``lie``, ``lie_midpoint``, ``lie_central<k>``)."""
+        raise NotImplementedError(f"{self!r} has no Lie algebra point for increment rules")
+
+    def base_point(self, x: Sequence[sp.Expr]) -> dict:
+        """The substitution of the base coordinates by the point ``x`` (none on a group)."""
+        raise NotImplementedError(f"{self!r} has no base point for increment rules")
+
+    def base_quadrature(self, xs: Sequence[Sequence[sp.Expr]],
+                        fs: Sequence[Sequence[sp.Expr]], h: sp.Expr) -> Points:
+        """Weighted substitutions of the base coordinates over one element, for the
+        first-order increment rule ``lie``: the trapezoid h/2 [l(x_0, ·) + l(x_1, ·)]
+        with x_1 the base point after the element — given (``len(xs) > len(fs)``: then
+        derivatives go through it by the chain rule) or β(x_0, f_0). A groupoid without
+        base coordinates gives one point of weight 1 instead (nothing to average)."""
+        x1 = xs[1] if len(xs) > len(fs) else self.target(xs[0], fs[0], h)
+        return [(sp.S.Half, self.base_point(xs[0])), (sp.S.Half, self.base_point(x1))]
+
+    def factor_slots(self, xs: Sequence[Sequence[sp.Expr]],
+                     fs: Sequence[Sequence[sp.Expr]]) -> list[tuple[list, list]]:
+        """Per factor (:attr:`factors`): its sources and fibres of every slot (product
+        rules)."""
+        return [(list(xs), list(fs))]
+
     @abstractmethod
     def discrete_symbols(self, order: int) -> tuple[sp.Symbol, ...]:
         """Symbols in which a discrete Lagrangian of this order is written directly."""
@@ -189,6 +313,21 @@ class Groupoid(ABC):
     @abstractmethod
     def fingerprint(self) -> str:
         """A string that changes whenever the groupoid's geometry changes (build cache)."""
+
+    @property
+    def initial_layout(self) -> str:
+        """The name of the layout of step-map initial data (``INITIAL_LAYOUTS`` of
+        ``symvi/_runtime/paths.py``): ``"nodes"`` where a path is its nodes
+        (:attr:`elements_are_node_pairs`), else ``"elements"`` (x_0, g_0, f)."""
+        return "nodes" if self.elements_are_node_pairs else "elements"
+
+    def state_symbols(self) -> tuple[tuple[sp.Symbol, ...], tuple[sp.Symbol, ...]]:
+        """The symbols of a state (x, v) of a first-order Lagrangian in the order of a
+        State's arrays: the base coordinates, then the velocity of each fibre coordinate
+        (the inputs of the ``legendre`` kernel, ∂L/∂v). By default the algebroid's q and y
+        (a product's blockwise: all base coordinates, then all velocities)."""
+        algebroid = self.algebroid()
+        return tuple(algebroid.q), tuple(algebroid.y)
 
     @property
     def element_dim(self) -> int:
@@ -235,20 +374,28 @@ class Groupoid(ABC):
         there (the whole-trajectory update; pair groupoid: x + η)."""
         raise NotImplementedError(f"{self!r} has no whole-trajectory update")
 
-    def c_context(self) -> dict:
-        """Numbers the C templates need beyond the kernels.
-
-        ``configuration_dim``: numbers of the configuration reconstructed along a path
-        (Σ d² over matrix-group factors); ``groups``: one dict per matrix-group factor
-        (see :meth:`MatrixLieGroup.group_context`); ``factors``: how the fibre of an
-        element follows from its two nodes, per factor — ``pair`` (a copy of the target
-        node's coordinates) or ``group`` (τ⁻¹(g_k⁻¹g_{k+1})/h of matrix group ``group``).
-        """
-        return {"configuration_dim": 0, "groups": [], "factors": []}
+    def c_context(self) -> CContext:
+        """What the C templates need beyond the kernels (:class:`CContext`): how the fibre
+        of an element follows from its two nodes in the whole-trajectory solve — a copy
+        of the target node's coordinates (:class:`NodeCopy`) or τ⁻¹(g_k⁻¹g_{k+1})/h of a
+        matrix-group factor (:class:`GroupFactor`). By default the copies that
+        :meth:`fibre_nodes` finds and no group."""
+        copies = [NodeCopy(j, a, 1) for a, j in enumerate(self.fibre_nodes()) if j is not None]
+        return CContext(node_copies=tuple(copies))
 
     def coefficient_functions(self) -> list:
         """Analytic coefficient functions the C reconstruction uses (exponential maps)."""
         return []
+
+    def fibre_nodes(self) -> tuple[int | None, ...]:
+        """Per fibre coordinate f_a: the index j of the base coordinate it is at the
+        element's target node (β(x, f)_j = f_a identically: a pair factor's fibre is the
+        next node), or None (an increment, or anything else). By default read off
+        :meth:`target` at symbolic coordinates."""
+        x = sp.symbols(f"x0:{self.source_dim}", real=True)
+        f = sp.symbols(f"f0:{self.fibre_dim}", real=True)
+        beta = tuple(self.target(x, f, sp.Symbol("h", positive=True)))
+        return tuple(beta.index(v) if v in beta else None for v in f)
 
     #: Whether the whole-trajectory solve (DESIGN.md §4) is available: the nodes are
     #: the unknowns, moved by :meth:`move` and, on matrix-group factors, corrected

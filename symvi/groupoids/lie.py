@@ -20,7 +20,6 @@ from __future__ import annotations
 from functools import cached_property
 from typing import Sequence
 
-import mpmath
 import numpy as np
 import sympy as sp
 
@@ -28,7 +27,8 @@ from ..errors import ModelError
 from ..discretisation.rules import LIE, LIE_MIDPOINT, MAX_ORDER, lie_central, window_derivatives
 from . import analytic
 from . import retraction as _retraction
-from .base import Algebroid, Groupoid, _check_derivative, _shape, derivative_name
+from .base import (Algebroid, CContext, GroupFactor, Groupoid, _check_derivative, _shape,
+                   derivative_name)
 
 
 def _symbol_names(names, n: int, default: str) -> tuple[str, ...]:
@@ -192,29 +192,18 @@ class MatrixLieGroup(Groupoid):
         return self.retraction.matrix(x)
 
     # -- structure maps (paper §2.1), for ``symvi check`` ---------------------------------
-    # Computed from the definition of the retraction, not from :mod:`.retraction`'s closed
-    # forms or dτ⁻¹: Cayley by a linear solve (any entries, meant for numbers: symbolic
-    # entries give large expressions), the exponential numerically with mpmath's expm and
-    # the series of :func:`_logm` at the current ``mpmath.mp.dps`` (numeric entries only).
+    # Computed from the definition of the retraction (:meth:`.Retraction.element`,
+    # :meth:`.Retraction.logarithm`), not from its closed forms or dτ⁻¹: Cayley by a
+    # linear solve (any entries, meant for numbers: symbolic entries give large
+    # expressions), the exponential numerically with mpmath's expm and a series of the
+    # logarithm at the current ``mpmath.mp.dps`` (numeric entries only).
     def group_element(self, x) -> sp.Matrix:
         """τ(X), X = Σ x_a E_a: (I − X/2)⁻¹(I + X/2) or exp(X)."""
-        X, eye = self.hat(x), sp.eye(self.matrix_dim)
-        if self.retraction.name == "cayley":
-            return (eye - X / 2).LUsolve(eye + X / 2)
-        if self.retraction.name == "exp" and _numeric(X):
-            return _from_mp(mpmath.expm(_to_mp(X)))
-        return self.retraction.matrix(x)
+        return self.retraction.element(x)
 
     def algebra_coordinates(self, W) -> tuple:
         """Coordinates of τ⁻¹(W) in the basis: 2(W + I)⁻¹(W − I) or log(W) (principal)."""
-        W, eye = sp.Matrix(W), sp.eye(self.matrix_dim)
-        if self.retraction.name == "cayley":
-            X = 2 * (W + eye).LUsolve(W - eye)
-        elif self.retraction.name == "exp" and _numeric(W):
-            X = _from_mp(_logm(_to_mp(W)))
-        else:
-            raise NotImplementedError(f"{self!r}: no τ⁻¹ for symbolic matrices")
-        return tuple(self.coordinates(X))
+        return tuple(self.coordinates(self.retraction.logarithm(W)))
 
     def identity(self, x):
         return (), (sp.S.Zero,) * self.fibre_dim
@@ -295,6 +284,10 @@ class MatrixLieGroup(Groupoid):
         """A Lie group has no base coordinates."""
         return {}
 
+    def base_quadrature(self, xs, fs, h):
+        """No base to average over: one point."""
+        return [(sp.Integer(1), {})]
+
     def discrete_symbols(self, order):
         return tuple(sp.Symbol(f"{n}_{k}", real=True) for k in range(order) for n in self.names)
 
@@ -325,67 +318,19 @@ class MatrixLieGroup(Groupoid):
             return "Lie–Poisson structure of 𝔤*, μ_k ↦ μ_{k+1}"
         return "Poisson structure of A*(P^αG) = 𝔤* × T*G, (ν, w_k, p) one element on"
 
-    def group_context(self, offset: int = 0) -> dict:
+    def group_context(self, offset: int = 0) -> GroupFactor:
         """One matrix-group factor for ``templates/group.c.j2``; ξ starts at f[offset]."""
-        return {"matrix_dim": self.matrix_dim, "dim": self.fibre_dim, "offset": offset,
-                "label": self.label, "invariants": self.invariants(),
-                "basis": [[float(v) for v in E] for E in self.basis],
-                "dual": [[float(v) for v in row] for row in self._dual.tolist()],
-                **self.retraction.c_context()}
+        return GroupFactor(label=self.label, matrix_dim=self.matrix_dim, dim=self.fibre_dim,
+                           offset=offset, invariants=self.invariants(),
+                           basis=[[float(v) for v in E] for E in self.basis],
+                           dual=[[float(v) for v in row] for row in self._dual.tolist()],
+                           retraction=self.retraction.c_context())
 
     def coefficient_functions(self) -> list:
         return self.retraction.coefficient_functions()
 
-    def c_context(self) -> dict:
-        return {"configuration_dim": self.matrix_dim ** 2, "groups": [self.group_context()],
-                "factors": [{"kind": "group", "group": 0, "f_offset": 0,
-                             "dim": self.fibre_dim}]}
-
-
-def _numeric(M: sp.Matrix) -> bool:
-    return all(v.is_number for v in M)
-
-
-def _to_mp(M: sp.Matrix):
-    return mpmath.matrix([[mpmath.mpf(sp.Float(sp.N(v, mpmath.mp.dps), mpmath.mp.dps)._mpf_)
-                           for v in M.row(i)] for i in range(M.rows)])
-
-
-def _logm(W):
-    """Principal logarithm of the mpmath matrix W at the working precision.
-
-    log W = 2 artanh Z = 2 Σ Z^{2k+1}/(2k+1), Z = (W − I)(W + I)⁻¹, converges to the
-    principal logarithm when ‖Z‖ < 1, each term a factor ‖Z‖² smaller: for the checks'
-    near-identity products (‖Z‖ ≲ 0.3) a few dozen products instead of mpmath's
-    repeated square roots (``logm``: a Denman–Beavers iteration per halving, then the
-    series of log(I + X); the routes check on an exponential-map model spent most of
-    its time there). mpmath's ``logm`` takes the matrices this series would converge
-    slowly for (‖Z‖ > 1/2).
-    """
-    with mpmath.extraprec(10):
-        eye = mpmath.eye(W.rows)
-        try:
-            Z = (W - eye) * mpmath.inverse(W + eye)
-        except ZeroDivisionError:   # an eigenvalue −1: no principal logarithm
-            return mpmath.logm(W)
-        ratio = mpmath.mnorm(Z, 1)
-        if ratio > 0.5:
-            return mpmath.logm(W)
-        # terms k > K are below ε‖Z‖ together: ratio^{2K} ≤ ε (1 − ratio²)
-        K = 0 if ratio == 0 else int(mpmath.ceil(mpmath.log(mpmath.eps * (1 - ratio**2))
-                                                 / (2 * mpmath.log(ratio))))
-        Z2, term, total = Z * Z, Z, Z
-        for k in range(1, K + 1):
-            term = term * Z2
-            total += term / (2 * k + 1)
-        return 2 * total
-
-
-def _from_mp(M) -> sp.Matrix:
-    """Back to SymPy Floats; the real part (logm of a real matrix may come back complex
-    with imaginary parts at round-off)."""
-    return sp.Matrix(M.rows, M.cols,
-                     lambda i, j: sp.Float(mpmath.re(M[i, j]), mpmath.mp.dps))
+    def c_context(self) -> CContext:
+        return CContext(self.matrix_dim ** 2, (self.group_context(),))
 
 
 def _hat3(v):

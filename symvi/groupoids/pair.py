@@ -7,7 +7,8 @@ import sympy as sp
 
 from ..errors import ModelError
 from ..discretisation.rules import MAX_ORDER, MIDPOINT, THREE_POINT, TRAPEZOID, central
-from .base import Algebroid, Groupoid, _check_derivative, _shape, derivative_name, step_matrix
+from .base import (Algebroid, CContext, Groupoid, NodeCopy, _check_derivative, _shape,
+                   derivative_name, step_matrix)
 
 
 def _names(coordinates: str | Sequence[str]) -> tuple[str, ...]:
@@ -145,10 +146,9 @@ class PairGroupoid(Groupoid):
     def move(self, x, eta):
         return tuple(a + b for a, b in zip(x, eta))
 
-    def c_context(self) -> dict:
-        n = self.fibre_dim
-        return {"configuration_dim": 0, "groups": [],
-                "factors": [{"kind": "pair", "x_offset": 0, "f_offset": 0, "dim": n}]}
+    def c_context(self) -> CContext:
+        """The fibre is the target node: one copy of all coordinates."""
+        return CContext(node_copies=(NodeCopy(0, 0, self.fibre_dim),))
 
     def predictor(self, xs, fs):
         # Linear extrapolation of the nodes: q_{k+1} ≈ 2 q_k − q_{k−1}.

@@ -12,7 +12,7 @@ import sympy as sp
 
 from ..errors import ModelError
 from ..discretisation.rules import product
-from .base import Algebroid, Groupoid, _shape, block_algebroid
+from .base import Algebroid, CContext, Groupoid, _shape, block_algebroid
 
 
 class ProductGroupoid(Groupoid):
@@ -190,23 +190,16 @@ class ProductGroupoid(Groupoid):
     def fingerprint(self) -> str:
         return "product:" + "|".join(f.fingerprint() for f in self.factors)
 
-    def c_context(self) -> dict:
-        groups, factors, offset, x_offset, size = [], [], 0, 0, 0
+    def c_context(self) -> CContext:
+        """The factors' contexts, moved to their offsets in the product's coordinates."""
+        groups, copies, x_offset, f_offset = [], [], 0, 0
         for factor in self.factors:
-            context = factor.c_context()
-            for F in context["factors"]:
-                moved = {"f_offset": F["f_offset"] + offset}
-                if F["kind"] == "group":
-                    moved["group"] = F["group"] + len(groups)
-                else:
-                    moved["x_offset"] = F["x_offset"] + x_offset
-                factors.append(F | moved)
-            for G in context["groups"]:
-                groups.append(G | {"offset": G["offset"] + offset})
-                size += G["matrix_dim"] ** 2
-            offset += factor.fibre_dim
+            context = factor.c_context().shifted(x_offset, f_offset)
+            groups += context.groups
+            copies += context.node_copies
             x_offset += factor.source_dim
-        return {"configuration_dim": size, "groups": groups, "factors": factors}
+            f_offset += factor.fibre_dim
+        return CContext(sum(G.matrix_dim ** 2 for G in groups), tuple(groups), tuple(copies))
 
     def coefficient_functions(self) -> list:
         return [c for f in self.factors for c in f.coefficient_functions()]

@@ -10,13 +10,22 @@ what the C reconstruction g_{k+1} = g_k·τ(hξ_k) needs.
   satisfy M^a (M² + θ²)^b = 0 (so(3), se(2), se(3), …; detected and checked exactly) both
   are finite sums with coefficients analytic in θ² (:mod:`symvi.groupoids.analytic`).
   Its chart is |θ| < π, where exp is injective.
+
+What differs between retractions is each class's methods and data, never a test of its
+name elsewhere: the C of ``templates/retractions.c.j2`` is chosen by the macro names of
+:meth:`Retraction.c_context` (a :class:`RetractionC`), the structure maps of ``symvi
+check`` call :meth:`Retraction.element` and :meth:`Retraction.logarithm`. The names
+``"cayley"`` and ``"exp"`` appear only in :data:`RETRACTIONS`, the registry that
+:func:`make` reads.
 """
 from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
+from dataclasses import dataclass
 from typing import Any, Protocol, Sequence
 
+import mpmath
 import sympy as sp
 
 from ..errors import ModelError
@@ -36,6 +45,28 @@ class Group(Protocol):
     def ad(self, x: Sequence[sp.Expr]) -> sp.Matrix: ...
 
 
+@dataclass(frozen=True)
+class RetractionC:
+    """What ``templates/retractions.c.j2`` needs of a group factor's retraction.
+
+    ``retract_macro`` names the macro that defines ``retract_i``, ``minus_identity_i`` and
+    ``chart_i`` (τ(X), τ(X) − I, the chart test); ``log_macro`` the body of
+    ``element_log_i`` (ξ from τ(hξ) = I + D); ``log_warm_start`` whether that body starts
+    from the fibre already in the element (then the whole-trajectory update gives it the
+    first-order change as a warm start). ``coefficients``: the closed form's coefficients
+    (C expressions in s = θ², or the names of analytic coefficient functions of s),
+    ``quadratic_form`` the matrix of θ² (None without a closed form), ``chart_theta_squared``
+    the chart's bound on θ² (C text; None: no bound).
+    """
+
+    retract_macro: str
+    log_macro: str
+    log_warm_start: bool
+    coefficients: tuple[str, ...] = ()
+    quadratic_form: list | None = None
+    chart_theta_squared: str | None = None
+
+
 class Retraction(ABC):
     """A retraction of one matrix Lie group; see the module docstring."""
 
@@ -53,8 +84,19 @@ class Retraction(ABC):
         """τ(X) as a d×d matrix."""
 
     @abstractmethod
-    def c_context(self) -> dict:
-        """Template data for ``retract`` in ``templates/group.c.j2``."""
+    def c_context(self) -> RetractionC:
+        """What the C of ``templates/retractions.c.j2`` needs (its macros, by name)."""
+
+    @abstractmethod
+    def element(self, x: Sequence[sp.Expr]) -> sp.Matrix:
+        """τ(X), X = Σ x_a E_a, from the retraction's definition, not from the closed
+        forms of :meth:`matrix` (the structure maps of ``symvi check``, which must be
+        independent of them): numbers meant, symbolic entries where possible."""
+
+    @abstractmethod
+    def logarithm(self, W: sp.Matrix) -> sp.Matrix:
+        """X = τ⁻¹(W) as a d×d matrix of the algebra, from the definition; a
+        NotImplementedError where the retraction has no τ⁻¹ for the entries given."""
 
     def coefficient_functions(self) -> list:
         """:class:`~symvi.groupoids.analytic.AnalyticCoefficient` classes the C needs."""
@@ -83,21 +125,32 @@ class Cayley(Retraction):
         X, eye = self.group.hat(x), sp.eye(self.group.matrix_dim)
         return ((eye - X / 2).inv() * (eye + X / 2)).applyfunc(sp.cancel)
 
+    def element(self, x):
+        """(I − X/2)⁻¹(I + X/2) by a linear solve (any entries)."""
+        X, eye = self.group.hat(x), sp.eye(self.group.matrix_dim)
+        return (eye - X / 2).LUsolve(eye + X / 2)
+
+    def logarithm(self, W):
+        """cay⁻¹(W) = 2(W + I)⁻¹(W − I) (any entries)."""
+        W, eye = sp.Matrix(W), sp.eye(self.group.matrix_dim)
+        return 2 * (W + eye).LUsolve(W - eye)
+
     def c_context(self):
         """With a minimal-polynomial structure, cay(X) − I = Σ_k d_k(θ²) X^k in closed
         form (so(3): 4 (X + X²/2)/(4 + θ²)), which the C evaluates in a few products
         instead of a pivoted solve of (I − X/2) D = X per retraction (a fifth of a path
         update on SO(3)); the denominators are powers of 4 + θ² > 0, θ² being positive
-        semi-definite."""
+        semi-definite. Either way the Cayley inverse is the chart's exact logarithm
+        (``cayley_log``: no Newton, no warm start)."""
         structure = self.group.minimal_structure
         if structure is None:
-            return {"retraction": "cayley", "cayley_coefficients": None}
+            return RetractionC("cayley_solve", "cayley_log", log_warm_start=False)
         s = sp.Symbol("s", nonnegative=True)
         terms = analytic.minus_identity_coefficients(analytic.CAYLEY, *structure["matrix"], s)
-        return {"retraction": "cayley",
-                "cayley_coefficients": [sp.ccode(sp.nsimplify(t)) for t in terms],
-                "quadratic_form": [[float(v) for v in row]
-                                   for row in structure["quadratic_form"].tolist()]}
+        return RetractionC("cayley_polynomial", "cayley_log", log_warm_start=False,
+                           coefficients=tuple(sp.ccode(sp.nsimplify(t)) for t in terms),
+                           quadratic_form=[[float(v) for v in row]
+                                           for row in structure["quadratic_form"].tolist()])
 
 
 class Exponential(Retraction):
@@ -126,16 +179,35 @@ class Exponential(Retraction):
         a, b = self.matrix_structure
         return analytic.apply(analytic.EXP, a, b, self.group.hat(x), self.theta_squared(x))
 
+    def element(self, x):
+        """exp(X): mpmath's expm at the working precision for numbers, else the closed
+        form of :meth:`matrix`."""
+        X = self.group.hat(x)
+        return _from_mp(mpmath.expm(_to_mp(X))) if _numeric(X) else self.matrix(x)
+
+    def logarithm(self, W):
+        """The principal logarithm (:func:`_logm`), numbers only."""
+        W = sp.Matrix(W)
+        if not _numeric(W):
+            raise NotImplementedError(f"{self.group.label}: no τ⁻¹ for symbolic matrices")
+        return _from_mp(_logm(_to_mp(W)))
+
     def coefficient_functions(self):
         return list(analytic.coefficients(analytic.EXP, *self.matrix_structure))
 
     def c_context(self):
-        return {"retraction": "exp",
-                "exp_coefficients": [c.__name__ for c in self.coefficient_functions()],
-                "quadratic_form": [[float(v) for v in row] for row in self.quadratic_form.tolist()],
-                "chart_theta_squared": repr(math.pi ** 2)}
+        """exp(X) = Σ c_k(θ²) X^k with analytic coefficient functions; its logarithm is
+        Newton's from the warm start or from the Cayley inverse rescaled to the angle
+        (``exponential_log``)."""
+        return RetractionC("exponential", "exponential_log", log_warm_start=True,
+                           coefficients=tuple(c.__name__ for c in self.coefficient_functions()),
+                           quadratic_form=[[float(v) for v in row]
+                                           for row in self.quadratic_form.tolist()],
+                           chart_theta_squared=repr(math.pi ** 2))
 
 
+#: Every retraction, by the name a group is declared with: the only place the names are
+#: read (layout test).
 RETRACTIONS = {"cayley": Cayley, "exp": Exponential}
 
 
@@ -144,3 +216,50 @@ def make(name: str, group: Group) -> Retraction:
     if name not in RETRACTIONS:
         raise ModelError(f"unknown retraction {name!r}; known: {sorted(RETRACTIONS)}")
     return RETRACTIONS[name](group)
+
+
+# -- numbers at mpmath's working precision (the structure maps of ``symvi check``) -------
+def _numeric(M: sp.Matrix) -> bool:
+    return all(v.is_number for v in M)
+
+
+def _to_mp(M: sp.Matrix):
+    return mpmath.matrix([[mpmath.mpf(sp.Float(sp.N(v, mpmath.mp.dps), mpmath.mp.dps)._mpf_)
+                           for v in M.row(i)] for i in range(M.rows)])
+
+
+def _logm(W):
+    """Principal logarithm of the mpmath matrix W at the working precision.
+
+    log W = 2 artanh Z = 2 Σ Z^{2k+1}/(2k+1), Z = (W − I)(W + I)⁻¹, converges to the
+    principal logarithm when ‖Z‖ < 1, each term a factor ‖Z‖² smaller: for the checks'
+    near-identity products (‖Z‖ ≲ 0.3) a few dozen products instead of mpmath's
+    repeated square roots (``logm``: a Denman–Beavers iteration per halving, then the
+    series of log(I + X); the routes check on an exponential-map model spent most of
+    its time there). mpmath's ``logm`` takes the matrices this series would converge
+    slowly for (‖Z‖ > 1/2).
+    """
+    with mpmath.extraprec(10):
+        eye = mpmath.eye(W.rows)
+        try:
+            Z = (W - eye) * mpmath.inverse(W + eye)
+        except ZeroDivisionError:   # an eigenvalue −1: no principal logarithm
+            return mpmath.logm(W)
+        ratio = mpmath.mnorm(Z, 1)
+        if ratio > 0.5:
+            return mpmath.logm(W)
+        # terms k > K are below ε‖Z‖ together: ratio^{2K} ≤ ε (1 − ratio²)
+        K = 0 if ratio == 0 else int(mpmath.ceil(mpmath.log(mpmath.eps * (1 - ratio**2))
+                                                 / (2 * mpmath.log(ratio))))
+        Z2, term, total = Z * Z, Z, Z
+        for k in range(1, K + 1):
+            term = term * Z2
+            total += term / (2 * k + 1)
+        return 2 * total
+
+
+def _from_mp(M) -> sp.Matrix:
+    """Back to SymPy Floats; the real part (logm of a real matrix may come back complex
+    with imaginary parts at round-off)."""
+    return sp.Matrix(M.rows, M.cols,
+                     lambda i, j: sp.Float(mpmath.re(M[i, j]), mpmath.mp.dps))

@@ -1,0 +1,303 @@
+"""ARCHITECTURE.md against the tree, and the house rules on whole packages (issue 49).
+
+Read from the sources, like ``test_layout.py``, whose rules (module-level import circles,
+``kind`` branches, the table's files) this extends: every file ARCHITECTURE.md names
+exists and every module and template is named there; no import cycle between symvi's
+packages; no module-level mutable state.
+"""
+from __future__ import annotations
+
+import ast
+import re
+from pathlib import Path
+
+import numpy as np
+from scipy.sparse import coo_matrix
+from scipy.sparse.csgraph import connected_components
+
+ROOT = Path(__file__).resolve().parent.parent
+SYMVI = ROOT / "symvi"
+TEXT = (ROOT / "ARCHITECTURE.md").read_text(encoding="utf-8")
+
+#: The packages whose dependencies must run one way.
+PACKAGES = ("declaration", "groupoids", "discretisation", "derivation", "codegen", "build",
+            "_runtime", "checks")
+#: Modules that count as units of their own in the package graph: the rule table, which
+#: the groupoids read to list their rules and which imports no groupoid (ARCHITECTURE.md,
+#: "Rules of the house"); the rest of ``discretisation`` reads the groupoids.
+OWN_UNITS = ("symvi.discretisation.rules",)
+
+
+# -- ARCHITECTURE.md names every module, and only modules that exist ---------------------
+def _files() -> set[str]:
+    """Every module of symvi and every template, by its path from the repository root."""
+    return ({p.relative_to(ROOT).as_posix() for p in SYMVI.rglob("*.py")}
+            | {p.relative_to(ROOT).as_posix() for p in (ROOT / "templates").glob("*.j2")})
+
+
+def _table_rows() -> list[tuple[tuple[str, ...], str]]:
+    """(the folders of the row, the row's text) for each row of the table of folders."""
+    rows = []
+    for line in TEXT.splitlines():
+        match = re.match(r"^\| ((?:`[\w/]+/`(?:, )?)+) \|", line)
+        if match:
+            rows.append((tuple(re.findall(r"`([\w/]+)/`", match.group(1))), line))
+    return rows
+
+
+def _named() -> tuple[set[str], list[str]]:
+    """The files ARCHITECTURE.md names, by path from the root, and the names it gives that
+    match no file. A name is a path from the root (``symvi/cli.py``,
+    ``templates/bvp.c.j2``, ``tests/test_layout.py``) or from ``symvi/``
+    (``build/cache.py``), or a bare file name in a row of the table,
+    which lies in one of that row's folders; a folder named with a trailing ``/``
+    (``symvi/checks/``) names its ``__init__.py``."""
+    files = _files()
+    named, unknown = set(), []
+    paths = re.findall(r"(?<![\w/<>.])((?:symvi|templates|[a-z_]+)/[\w/]*[\w]+\.(?:py|j2))\b",
+                       TEXT)
+    for path in paths:
+        found = [p for p in (path, f"symvi/{path}") if (ROOT / p).is_file()]
+        named |= set(found[:1]) & files
+        if not found:
+            unknown.append(path)
+    for folder in re.findall(r"`((?:symvi|templates)(?:/[\w]+)*)/`", TEXT):
+        if f"{folder}/__init__.py" in files:
+            named.add(f"{folder}/__init__.py")
+    for folders, line in _table_rows():
+        for name in re.findall(r"`([\w.]+\.(?:py|j2))`", line):
+            found = [f"{folder}/{name}" for folder in folders if f"{folder}/{name}" in files]
+            named |= set(found)
+            if not found:
+                unknown.append(f"{'|'.join(folders)}/{name}")
+    return named, unknown
+
+
+def test_architecture_names_only_modules_that_exist():
+    _, unknown = _named()
+    assert not unknown, f"ARCHITECTURE.md names files that do not exist: {unknown}"
+
+
+def test_architecture_names_every_module_and_template():
+    named, _ = _named()
+    unnamed = sorted(_files() - named)
+    assert not unnamed, f"modules ARCHITECTURE.md does not name: {unnamed}"
+
+
+def test_the_names_are_read_as_files():
+    """The reading above finds the table's rows and what they name (a guard against a
+    change of format that would make both tests pass vacuously)."""
+    named, _ = _named()
+    assert {"symvi/_runtime/results.py", "symvi/build/cache.py", "symvi/cli.py",
+            "templates/kernel.c.j2", "symvi/declaration/rank.py"} <= named
+    assert len(_table_rows()) >= 9
+
+
+# -- no import cycle between packages ---------------------------------------------------
+def _modules() -> dict[str, Path]:
+    """Every module of the package by its dotted name (a package by its __init__)."""
+    found = {}
+    for path in SYMVI.rglob("*.py"):
+        parts = path.relative_to(ROOT).with_suffix("").parts
+        found[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
+    return found
+
+
+def _is_type_checking(node: ast.If) -> bool:
+    test = node.test
+    return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or \
+        (isinstance(test, ast.Attribute) and test.attr == "TYPE_CHECKING")
+
+
+def _imports(name: str, path: Path, modules: dict[str, Path]) -> set[str]:
+    """The symvi modules ``name`` imports anywhere — at load or inside a function, which
+    is a dependency all the same — except under ``if TYPE_CHECKING:`` (annotations only,
+    never run)."""
+    package = name if path.name == "__init__.py" else name.rpartition(".")[0]
+    found = set()
+    stack = list(ast.parse(path.read_text(encoding="utf-8")).body)
+    while stack:
+        node = stack.pop()
+        if isinstance(node, ast.If) and _is_type_checking(node):
+            stack.extend(node.orelse)
+            continue
+        if isinstance(node, ast.Import):
+            found |= {alias.name for alias in node.names}
+        elif isinstance(node, ast.ImportFrom):
+            base = package.rsplit(".", node.level - 1)[0] if node.level else ""
+            module = ".".join(p for p in (base, node.module) if p)
+            found |= {f"{module}.{a.name}" if f"{module}.{a.name}" in modules else module
+                      for a in node.names}
+        stack.extend(ast.iter_child_nodes(node))
+    return found & modules.keys()
+
+
+def _unit(module: str) -> str | None:
+    """The unit of the package graph ``module`` belongs to (None: outside the packages)."""
+    if module in OWN_UNITS:
+        return module
+    parts = module.split(".")
+    return parts[1] if len(parts) > 1 and parts[1] in PACKAGES else None
+
+
+def package_edges() -> dict[tuple[str, str], list[str]]:
+    """(importing unit, imported unit) -> the module imports that make the edge."""
+    modules = _modules()
+    edges: dict[tuple[str, str], list[str]] = {}
+    for name, path in modules.items():
+        for target in _imports(name, path, modules):
+            a, b = _unit(name), _unit(target)
+            if a and b and a != b:
+                edges.setdefault((a, b), []).append(f"{name} -> {target}")
+    return edges
+
+
+def test_no_import_cycle_between_packages():
+    edges = package_edges()
+    units = sorted({u for edge in edges for u in edge})
+    index = {u: i for i, u in enumerate(units)}
+    rows, cols = np.array([(index[a], index[b]) for a, b in edges]).T
+    graph = coo_matrix((np.ones(len(rows)), (rows, cols)), shape=(len(units),) * 2)
+    count, labels = connected_components(graph, directed=True, connection="strong")
+    cycles = [[units[i] for i in np.flatnonzero(labels == c)] for c in range(count)]
+    cycles = [c for c in cycles if len(c) > 1]
+    detail = {edge: found for edge, found in edges.items()
+              if any(set(edge) <= set(c) for c in cycles)}
+    assert not cycles, f"import cycles between packages: {cycles}; through {detail}"
+
+
+#: The pipeline's order (ARCHITECTURE.md): a unit imports only units before it.
+LAYERS = ("symvi.discretisation.rules", "groupoids", "declaration", "discretisation",
+          "derivation", "codegen", "build", "checks")
+
+
+def test_the_pipeline_runs_one_way():
+    """Each package imports only those before it in the pipeline: the declaration neither
+    the discretisation nor the derivation (issue 49's reach-backs), the run time no symvi
+    package. Another package may read the run time only in its leaves, modules that import
+    no other module of the run time (the shared constants of ``_runtime/signs.py``, which
+    imports nothing at all, read by the declaration): never its machinery."""
+    edges = package_edges()
+    backwards = {edge: found for edge, found in edges.items()
+                 if edge[0] == "_runtime" or (edge[1] != "_runtime"
+                                              and LAYERS.index(edge[1]) >= LAYERS.index(edge[0]))}
+    assert not backwards, f"imports against the pipeline: {backwards}"
+    modules = _modules()
+    read = {link.rpartition(" -> ")[2] for (_, b), found in edges.items() if b == "_runtime"
+            for link in found}
+    assert "symvi._runtime.signs" in read
+    machinery = sorted(m for m in read
+                       if _imports(m, modules[m], modules) - {m} or modules[m].name == "__init__.py")
+    assert not machinery, f"other packages read the run time's machinery: {machinery}"
+    signs = ast.parse((SYMVI / "_runtime" / "signs.py").read_text(encoding="utf-8"))
+    assert not [n for n in ast.walk(signs) if isinstance(n, (ast.Import, ast.ImportFrom))]
+
+
+# -- no module-level mutable state --------------------------------------------------------
+#: Methods that change a dict, list, set, deque or OrderedDict in place, or take a lock.
+MUTATORS = {"append", "extend", "insert", "pop", "popitem", "remove", "clear", "update",
+            "setdefault", "add", "discard", "move_to_end", "appendleft", "sort", "reverse",
+            "difference_update", "intersection_update", "symmetric_difference_update",
+            "acquire", "release"}
+#: Calls that make a mutable container or a lock.
+MUTABLE_CALLS = {"dict", "list", "set", "OrderedDict", "defaultdict", "deque", "Counter",
+                 "bytearray", "Lock", "RLock", "Semaphore", "Condition", "Event"}
+#: Module-level state kept on purpose, each with its reason: (file, name) -> why.
+KEPT = {
+    ("symvi/build/__init__.py", "_LOAD_LOCK"):
+        "guards sys.modules, which is process-wide by nature, while a package loads",
+    ("symvi/_runtime/results.py", "globals()"):
+        "the copies of results.py share one set of classes through sys.modules (issue 19 "
+        "item 5; tests/test_shared_results.py)",
+}
+
+
+def _mutable(value: ast.expr) -> bool:
+    if isinstance(value, (ast.Dict, ast.List, ast.Set, ast.DictComp, ast.ListComp,
+                          ast.SetComp)):
+        return True
+    if isinstance(value, ast.Call):
+        f = value.func
+        return (f.attr if isinstance(f, ast.Attribute) else getattr(f, "id", None)) \
+            in MUTABLE_CALLS
+    return False
+
+
+def _module_state(tree: ast.Module) -> set[str]:
+    """Names a module binds at its top level to a mutable container or a lock."""
+    names = set()
+    for node in tree.body:
+        if isinstance(node, ast.Assign):
+            targets, value = node.targets, node.value
+        elif isinstance(node, ast.AnnAssign) and node.value is not None:
+            targets, value = [node.target], node.value
+        else:
+            continue
+        names |= {t.id for t in targets if isinstance(t, ast.Name) and _mutable(value)}
+    return names
+
+
+def _changes(node: ast.AST, names: set[str]) -> str | None:
+    """The module-level name ``node`` changes in place (or takes, a lock), if any."""
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Attribute) \
+            and isinstance(node.func.value, ast.Name) and node.func.value.id in names \
+            and node.func.attr in MUTATORS:
+        return node.func.value.id
+    if isinstance(node, (ast.Assign, ast.AugAssign, ast.Delete)):
+        targets = [node.target] if isinstance(node, ast.AugAssign) else node.targets
+        for t in targets:
+            if isinstance(t, (ast.Subscript, ast.Attribute)) and isinstance(t.value, ast.Name) \
+                    and t.value.id in names:
+                return t.value.id
+    if isinstance(node, (ast.With, ast.AsyncWith)):
+        for item in node.items:
+            if isinstance(item.context_expr, ast.Name) and item.context_expr.id in names:
+                return item.context_expr.id
+    if isinstance(node, ast.Call) and isinstance(node.func, ast.Name) \
+            and node.func.id == "globals":
+        return "globals()"
+    return None
+
+
+def mutable_state(path: Path) -> list[tuple[str, int, str]]:
+    """(name, line, what) for each change of module-level state after the module has
+    loaded: a container or lock bound at the top level and changed inside a function, a
+    ``global`` statement, a write through ``globals()``. Building a constant at the top
+    level (a list appended to while the module loads) is not state."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    names = _module_state(tree)
+    found = []
+    functions = [n for n in ast.walk(tree)
+                 if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))]
+    for function in functions:
+        for node in ast.walk(function):
+            if isinstance(node, ast.Global):
+                found += [(name, node.lineno, "global statement") for name in node.names]
+            name = _changes(node, names)
+            if name:
+                found.append((name, node.lineno, "changed in a function"))
+    return sorted(set(found))
+
+
+def test_no_module_level_mutable_state():
+    offending = []
+    for path in sorted(SYMVI.rglob("*.py")):
+        rel = path.relative_to(ROOT).as_posix()
+        offending += [f"{rel}:{line}: {name} ({what})" for name, line, what in
+                      mutable_state(path) if (rel, name) not in KEPT]
+    assert not offending, "module-level mutable state:\n" + "\n".join(offending)
+
+
+def test_the_state_scan_finds_state(tmp_path):
+    """The scan sees a cache dict filled in a function, a lock taken, ``global`` and a
+    write through ``globals()``; not a constant built while the module loads."""
+    source = tmp_path / "m.py"
+    source.write_text("import threading\n"
+                      "_MEMO = {}\n_LOCK = threading.Lock()\nCOUNT = 0\nTABLE = []\n"
+                      "TABLE.append(1)\nNAMES = ('a', 'b')\n"
+                      "def f(k):\n    with _LOCK:\n        _MEMO[k] = 1\n"
+                      "def g():\n    global COUNT\n    COUNT += 1\n"
+                      "def h():\n    globals()['x'] = 1\n    return TABLE[0], NAMES\n")
+    assert [(n, w) for n, _, w in mutable_state(source)] == [
+        ("COUNT", "global statement"), ("_LOCK", "changed in a function"),
+        ("_MEMO", "changed in a function"), ("globals()", "changed in a function")]
