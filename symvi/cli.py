@@ -175,7 +175,7 @@ def _solve(module, ex, steps: int, h: float, params: dict, args, options: dict):
     result = module.solve_bvp(ex.start, ex.end, steps, h, params,
                               guess=ex.guess_nodes(steps, module.model.order), **options)
     elapsed = time.perf_counter() - start
-    free = module.model.info.get("free_horizon")
+    free = module.model.info.free_horizon
     # a free horizon's T and h are the solve's, not the guess passed in
     T, step = (result.T, float(result.t[1])) if free else (steps * h, h)
     print(f"solve_bvp  N = {steps}, h = {step:g}, T = {T:g}{' (free)' if free else ''}: "
@@ -185,7 +185,7 @@ def _solve(module, ex, steps: int, h: float, params: dict, args, options: dict):
     if free:
         print(f"horizon    T = {T:.10g} (free, from the guess {steps * h:g}; h = {step:.6g})")
     if result.end_multipliers is not None:
-        ends = module.model.info.get("end_conditions", [])
+        ends = module.model.info.end_conditions
         print(f"end        ν = {np.array2string(result.end_multipliers, precision=6)} "
               f"for {', '.join(ends)}")
     if result.controls is not None:

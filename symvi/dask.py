@@ -189,8 +189,8 @@ def _batch(values: dict) -> BatchResult:
     return BatchResult(**values | {"status": Status(values["status"])})
 
 
-#: A State travels as (_STATE, its fields): a worker that has imported no package yet
-#: cannot unpickle the runtime's classes (``_runtime/results.py``).
+#: A State travels as (_STATE, its fields): plain fields, whatever the worker has
+#: imported (a pickled result would load symvi's classes, ``_runtime/results.py``).
 _STATE = "symvi.State"
 
 

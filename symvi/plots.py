@@ -11,9 +11,12 @@ from __future__ import annotations
 
 import os
 import secrets
-from typing import Any, Sequence
+from typing import TYPE_CHECKING, Any, Sequence
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from ._runtime.model_info import ModelInfo
 
 #: Why ``--plot`` cannot run: the one message of the CLI's early check and of a late import.
 MISSING = "--plot needs matplotlib: pip install 'symvi[plots]'"
@@ -24,20 +27,20 @@ UNWRITABLE = ("pgf",)
 COMMON = (".png", ".pdf", ".svg")
 
 
-def plot_result(result: Any, model: Any, info: dict, file: str | os.PathLike) -> None:
+def plot_result(result: Any, model: Any, info: ModelInfo, file: str | os.PathLike) -> None:
     """Write the plot of ``result`` (a ``StepResult`` or ``BVPResult``) of the declared
     ``model`` (a :class:`symvi.Model`, for the coordinates' names) compiled with metadata
     ``info`` (the generated package's ``INFO``) to the image ``file`` (its format from the
     suffix, e.g. ``.png``)."""
     plt = _pyplot()
     names = [str(s) for s in model.groupoid.continuous_symbols(1)]
-    n = info["fibre_dim"]
+    n = info.fibre_dim
     fig, axes = plt.subplots(3, 1, figsize=(8, 8), sharex=True, constrained_layout=True)
     _configuration(axes[0], result, info, names[:len(names) - n])
     _velocities(axes[1], result, info, names[-n:])
     _judge(axes[2], result, info)
     axes[-1].set_xlabel("t")
-    fig.suptitle(f"{info['name']}: {result.status.name}")
+    fig.suptitle(f"{info.name}: {result.status.name}")
     _save(plt, fig, file)
 
 
@@ -84,7 +87,7 @@ def _pyplot():
     return plt
 
 
-def _configuration(ax, result, info: dict, names: Sequence[str]) -> None:
+def _configuration(ax, result, info: ModelInfo, names: Sequence[str]) -> None:
     if result.x is not None and result.x.shape[1]:
         _lines(ax, result.t[:len(result.x)], result.x, names, "configuration")
         return
@@ -96,12 +99,12 @@ def _configuration(ax, result, info: dict, names: Sequence[str]) -> None:
     ax.legend(loc="best", fontsize="small")
 
 
-def _velocities(ax, result, info: dict, names: Sequence[str]) -> None:
+def _velocities(ax, result, info: ModelInfo, names: Sequence[str]) -> None:
     h = float(result.t[1] - result.t[0])
-    # per fibre coordinate (INFO["fibre_nodes"]): a copy of the next node's coordinate j
+    # per fibre coordinate (INFO.fibre_nodes): a copy of the next node's coordinate j
     # (a pair factor) has the difference quotient of x_j as its velocity, an increment (ξ
     # on a group) is the velocity itself
-    nodes = np.asarray(info["fibre_nodes"], dtype=int)
+    nodes = np.asarray(info.fibre_nodes, dtype=int)
     copies = nodes >= 0
     values = np.array(result.f, dtype=float, copy=True)
     if copies.any():
@@ -110,7 +113,7 @@ def _velocities(ax, result, info: dict, names: Sequence[str]) -> None:
     _lines(ax, result.t[:len(values)] + h / 2, values, names, "velocity")
 
 
-def _judge(ax, result, info: dict) -> None:
+def _judge(ax, result, info: ModelInfo) -> None:
     controls = getattr(result, "controls", None)
     energy = getattr(result, "energy", None)
     noether = getattr(result, "noether", None)

@@ -589,7 +589,7 @@ def rotor_model():
 def rotor(build_dir):
     model = rotor_model()
     mod = compile_model(model, build_dir)
-    assert mod.INFO["source_dim"] == 1 and mod.INFO["fibre_dim"] == 4
+    assert mod.INFO.source_dim == 1 and mod.INFO.fibre_dim == 4
     return mod, Geometry(model.groupoid.factors[0])
 
 

@@ -206,9 +206,6 @@ MUTABLE_CALLS = {"dict", "list", "set", "OrderedDict", "defaultdict", "deque", "
 KEPT = {
     ("symvi/build/__init__.py", "_LOAD_LOCK"):
         "guards sys.modules, which is process-wide by nature, while a package loads",
-    ("symvi/_runtime/results.py", "globals()"):
-        "the copies of results.py share one set of classes through sys.modules (issue 19 "
-        "item 5; tests/test_shared_results.py)",
 }
 
 
@@ -301,3 +298,60 @@ def test_the_state_scan_finds_state(tmp_path):
     assert [(n, w) for n, _, w in mutable_state(source)] == [
         ("COUNT", "global statement"), ("_LOCK", "changed in a function"),
         ("_MEMO", "changed in a function"), ("globals()", "changed in a function")]
+
+
+# -- the compile → run contract is one typed ModelInfo (issue 49, item 2) ------------------
+#: A string lookup in the package's metadata: ``info[…]``, ``INFO[…]``, ``info.get(…)``,
+#: ``INFO.get(…)`` (``model.info``, ``self.info``, ``module.INFO`` alike).
+INFO_LOOKUP = re.compile(r"""\b(?:info|INFO)\s*(?:\[|\.get\s*\()""")
+#: A kernel named by a free string where the run time calls or looks one up:
+#: ``along_vector("gauge", …)``, ``kernel_outputs("end_horizon", …)``, ``kernel("step")``.
+KERNEL_BY_STRING = re.compile(r"""\b(?:along_vector|along|kernel_outputs|evaluate|kernel"""
+                              r"""|has_kernel|_points|width)\s*\(\s*["']"""
+                              r"""|\b_Quantity\s*\(\s*["'][^"']*["']\s*,\s*["']"""
+                              r"""|\b_points\s*\(\s*\w+\s*,\s*["']""")
+
+
+def _source_lines(paths):
+    for path in paths:
+        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
+            yield f"{path.relative_to(ROOT).as_posix()}:{number}: {line.strip()}", line
+
+
+def test_model_info_is_read_by_attribute():
+    """No ``info[…]``/``info.get(…)``/``INFO[…]`` string lookup is left in symvi/ (the run
+    time included) or the templates: what a package knows about its model is
+    ``_runtime/model_info.py``'s frozen ``ModelInfo``, read by attribute; and the run
+    time names the kernels it calls by ``Kernel``, not by strings."""
+    sources = [*sorted(SYMVI.rglob("*.py")), *sorted((ROOT / "templates").glob("*.j2"))]
+    lookups = [where for where, line in _source_lines(sources) if INFO_LOOKUP.search(line)]
+    assert not lookups, "string lookups in INFO:\n" + "\n".join(lookups)
+    runtime = sorted((SYMVI / "_runtime").glob("*.py"))
+    named = [where for where, line in _source_lines(runtime) if KERNEL_BY_STRING.search(line)]
+    assert not named, "kernels named by strings in the run time:\n" + "\n".join(named)
+    for line in ('spec = self.info["kernels"].get(kernel)', "info['kind']", 'INFO["key"]',
+                 'model.info.get("gauges", ())', 'int(info.get("controls") or 0)',
+                 "{model.info['kind']} groupoid", 'info ["x"]'):
+        assert INFO_LOOKUP.search(line), line
+    for line in ('model.along_vector("gauge", x, f, h, p)', 'kernel_outputs("end_horizon", z)',
+                 '_points(model, "legendre", Z, P, H)', 'width("momentum_plus")',
+                 '_Quantity("momenta", "momentum_minus", w, 0, r)'):
+        assert KERNEL_BY_STRING.search(line), line
+    for line in ("info.kernel(Kernel.STEP).nz", "INFO.fibre_nodes", "information[0]",
+                 "model.along_vector(Kernel.GAUGE, x, f, h, p)",
+                 '_Quantity("momenta", Kernel.MOMENTUM_MINUS, w, 0, r)'):
+        assert not INFO_LOOKUP.search(line) and not KERNEL_BY_STRING.search(line), line
+
+
+def test_model_info_is_a_leaf_of_the_run_time():
+    """The build writes ``INFO`` through ``ModelInfo`` and the package reads it back: the
+    module imports the standard library only (symvi reads it, a package cannot import
+    symvi), and its schema version is an integer the literal carries."""
+    path = SYMVI / "_runtime" / "model_info.py"
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    imported = {alias.name.split(".")[0] for node in ast.walk(tree)
+                if isinstance(node, ast.Import) for alias in node.names}
+    imported |= {(node.module or "").split(".")[0] for node in ast.walk(tree)
+                 if isinstance(node, ast.ImportFrom) and not node.level}
+    assert not [n for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.level]
+    assert imported <= {"__future__", "dataclasses", "enum", "typing"}, imported

@@ -162,7 +162,7 @@ def test_unbounded_equations_hold_where_no_bound_is_active(slew):
     nodes = np.arange(2, N_ORACLE - 1)
     rel, noise = oracle("rigid_body_oc", slew, np.zeros((N_ORACLE + 1, 0)), r.g, r.f, None, h,
                         nodes)
-    print(f"\n{ex['name']}: relative gradient of S ≤ {rel[~touched].max():.1e} at "
+    print(f"\n{ex.name}: relative gradient of S ≤ {rel[~touched].max():.1e} at "
           f"{(~touched).sum()} free nodes, ≥ {rel[touched].min():.1e} at the {touched.sum()} "
           f"nodes meeting an active bound (noise {noise.max():.1e})")
     assert touched.any() and (~touched).any()
@@ -259,7 +259,7 @@ def test_converges_from_every_guess(slew, N):
         assert r.success, r.message
         costs.append(r.cost)
         iterations.append(r.iterations)
-    print(f"\n{ex['name']} N={N}: cost {reference.cost:.12g} ({reference.iterations} "
+    print(f"\n{ex.name} N={N}: cost {reference.cost:.12g} ({reference.iterations} "
           f"iterations); other guesses {min(iterations)}–{max(iterations)} iterations")
     np.testing.assert_allclose(costs, reference.cost, rtol=1e-9)
 

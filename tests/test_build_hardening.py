@@ -174,7 +174,7 @@ def test_description_cannot_inject_code_and_round_trips(tmp_path):
     out = tmp_path / "out"
     module = compile_model(tiny(nasty), out)
     assert not marker.exists()
-    assert nasty in module.__doc__ and module.INFO["description"] == nasty
+    assert nasty in module.__doc__ and module.INFO.description == nasty
     child = import_in_child(out)
     assert child.returncode == 0, child.stderr
     assert not marker.exists()
@@ -182,7 +182,7 @@ def test_description_cannot_inject_code_and_round_trips(tmp_path):
 
     # The description is part of the cache key: changing only it rebuilds.
     other = compile_model(tiny("another description"), out)
-    assert other.INFO["key"] != module.INFO["key"]
+    assert other.INFO.key != module.INFO.key
     assert "another description" in other.__doc__ and nasty not in other.__doc__
 
 

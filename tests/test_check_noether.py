@@ -87,7 +87,7 @@ def test_magnetic_momenta_are_conserved_to_round_off(tmp_path):
     p, q = result.momenta[:-1], result.q[:-1]
     np.testing.assert_allclose(F[:, 1], p[:, 0] - 1.5 * q[:, 1] / 2, atol=1e-13)
     np.testing.assert_allclose(F[:, 0], q[:, 0] * p[:, 1] - q[:, 1] * p[:, 0], atol=1e-13)
-    assert mod.INFO["symmetries"] == ["rotation", "x_translation"]
+    assert mod.INFO.symmetries == ("rotation", "x_translation")
 
 
 def test_second_order_translations_and_rotations_of_a_spline(tmp_path):

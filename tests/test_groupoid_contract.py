@@ -87,7 +87,7 @@ def _oracle(mod, x, f, h, nodes) -> tuple[np.ndarray, np.ndarray]:
 @pytest.mark.parametrize("rule", ["velocity_midpoint", "lie"])
 def test_example_groupoid_integrates_and_passes_the_oracle(rule, velocity_modules):
     mod = velocity_modules[rule]
-    assert mod.INFO["kind"] == "velocity_pair" and mod.INFO["fibre_nodes"] == [-1, -1]
+    assert mod.INFO.kind == "velocity_pair" and mod.INFO.fibre_nodes == (-1, -1)
     result = mod.integrate((X0, [V0]), N_STEPS, H)
     assert result.success, result.message
     x, f = np.asarray(result.x), np.asarray(result.f)
@@ -182,7 +182,7 @@ def test_the_template_context_is_typed_data():
 
 
 def test_initial_layouts_read_as_the_compiled_model_does(velocity_modules, tmp_path):
-    """The layouts of initial data the package names (``INFO["initial_layout"]``,
+    """The layouts of initial data the package names (``INFO.initial_layout``,
     ``_runtime/paths.py``) read what :meth:`CompiledModel.initial_state` reads: the
     first K nodes on the pair groupoid, (x₀, f) here."""
     import importlib
@@ -192,7 +192,7 @@ def test_initial_layouts_read_as_the_compiled_model_does(velocity_modules, tmp_p
     for mod, initial, name in ((pair, [X0, [0.5, 0.1]], "nodes"),
                                (velocity_modules["lie"], (X0, [V0]), "elements")):
         paths = importlib.import_module(f"{mod.__name__}._runtime.paths")
-        assert mod.INFO["initial_layout"] == name
+        assert mod.INFO.initial_layout == name
         read = paths.initial_layout(mod.model).read(mod.model, initial)
         for ours, theirs in zip(read, mod.model.initial_state(initial)):
             np.testing.assert_array_equal(ours, theirs)
@@ -218,7 +218,7 @@ def test_a_cayley_group_without_closed_form_emits():
 
 
 def test_a_product_of_pair_groupoids_starts_from_a_state(tmp_path):
-    """Every fibre coordinate of Q₁×Q₁ copies a node (``INFO["fibre_nodes"]``), so a State
+    """Every fibre coordinate of Q₁×Q₁ copies a node (``INFO.fibre_nodes``), so a State
     starts it as it starts the pair groupoid of both coordinates: the same path."""
     from symvi import ProductGroupoid
     A, B, P = PairGroupoid("a"), PairGroupoid("b"), PairGroupoid("a b")
@@ -228,7 +228,7 @@ def test_a_product_of_pair_groupoids_starts_from_a_state(tmp_path):
                             tmp_path)
     pair = compile_model(Model(name="pair_state", groupoid=P,
                                lagrangian=_lagrangian(P.q, P.qdot)), tmp_path)
-    assert product.INFO["fibre_nodes"] == [0, 1]
+    assert product.INFO.fibre_nodes == (0, 1)
     ours = product.integrate(State(v=V0, x=X0), N_STEPS, H)
     theirs = pair.integrate(State(v=V0, x=X0), N_STEPS, H)
     assert ours.success and theirs.success

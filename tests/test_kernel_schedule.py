@@ -75,18 +75,20 @@ def whole_and_split(tmp_path_factory):
         parts = compile_model(model, tmp_path_factory.mktemp("parts"), force=True)
         source = emit_module.emit(derive(discretise(model)))
     # every kernel in a translation unit of its own, in parts of 5 statements
-    assert [name for name, _ in source.units] == list(whole.INFO["kernels"])
+    assert [name for name, _ in source.units] == list(whole.INFO.kernel_names)
     assert sum(text.count("SYMVI_PART k_") for _, text in source.units) > 40
     return model, whole, parts
 
 
 def test_split_kernels_give_the_same_bits(whole_and_split):
     model, whole, parts = whole_and_split
-    assert whole.INFO["kernels"] == parts.INFO["kernels"]
+    assert ([(k.name, k.nz, k.outputs) for k in whole.INFO.kernels]
+            == [(k.name, k.nz, k.outputs) for k in parts.INFO.kernels])
     rng = np.random.default_rng(0)
-    for kernel, spec in whole.INFO["kernels"].items():
+    for spec in whole.INFO.kernels:
+        kernel = spec.name
         for _ in range(5):
-            z, h = rng.uniform(-1, 1, spec["nz"]), rng.uniform(0.01, 0.2)
+            z, h = rng.uniform(-1, 1, spec.nz), rng.uniform(0.01, 0.2)
             for a, b in zip(whole.evaluate(kernel, z, h), parts.evaluate(kernel, z, h)):
                 np.testing.assert_array_equal(a, b, err_msg=kernel)
     ex = model.example

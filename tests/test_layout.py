@@ -80,7 +80,7 @@ def test_no_kind_branches_outside_the_groupoids():
 
 def test_no_kind_branches_in_templates_and_runtime():
     """Neither the templates nor the run time read a kind at all (the run time may show
-    ``INFO["kind"]`` in messages and results, never branch on it)."""
+    ``INFO.kind`` in messages and results, never branch on it)."""
     runtime = sorted((SYMVI / "_runtime").glob("*.py"))
     templates = sorted((ROOT / "templates").glob("*.j2"))
     offending = [where for where, line in _lines([*runtime, *templates])
@@ -106,8 +106,8 @@ NODE_PAIRS_PENDING: set[str] = set()
 
 
 def test_the_runtime_reads_what_to_do_not_a_node_pairs_flag():
-    """The run time maps states to fibres and back through ``INFO["fibre_nodes"]`` and
-    reads initial data in the layout ``INFO["initial_layout"]`` names; no test of
+    """The run time maps states to fibres and back through ``INFO.fibre_nodes`` and
+    reads initial data in the layout ``INFO.initial_layout`` names; no test of
     ``node_pairs``."""
     runtime = [p for p in sorted((SYMVI / "_runtime").glob("*.py"))
                if p.name not in NODE_PAIRS_PENDING]

@@ -52,7 +52,7 @@ def test_lifted_steps_are_the_newton_steps(compiled, name):
     nodes) times a pair groupoid with an exactly dependent constraint (its gauge rows),
     with and without the inertia correction's shift: the same correction as J η = −R."""
     mod = compiled(name)
-    assert mod.INFO["lifted"]
+    assert mod.INFO.lifted
     (node, res, ab, bw), (lifted, _, _, _) = systems(mod, name, 40)
     for shift in (0.0, 3.0):
         expected = node.solve(ab, bw, -res, shift)

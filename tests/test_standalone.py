@@ -78,7 +78,7 @@ CHILD = textwrap.dedent("""
         final, rows = r.f[-1], r.f.shape[0] + 1
     else:
         initial = spec["initial"]
-        if mod.INFO["kind"] == "lie":
+        if mod.INFO.kind == "lie":
             initial = tuple(initial)
         r = mod.integrate(initial, spec["n_steps"], spec["h"])
         final, rows = r.q[-1], r.q.shape[0]
@@ -214,7 +214,7 @@ def test_unchanged_model_reuses_build(tmp_path):
     assert (after.st_ino, after.st_mtime_ns) == (before.st_ino, before.st_mtime_ns)
     assert extension_of(tmp_path / "cache_probe") == ext
     assert elapsed < 0.5, f"cached compile took {elapsed:.2f} s"
-    assert again.INFO["key"] == mod.INFO["key"]
+    assert again.INFO.key == mod.INFO.key
     print(f"\ncached compile: {elapsed * 1e3:.1f} ms")
 
 
@@ -222,13 +222,13 @@ def test_changed_default_or_lagrangian_rebuilds(tmp_path):
     T, N = np.pi, 2000
     h = T / N
     base = compile_model(oscillator(1.0), tmp_path)
-    key0 = base.INFO["key"]
+    key0 = base.INFO.key
     ext0 = extension_of(tmp_path / "cache_probe")
 
     stiffer = compile_model(oscillator(4.0), tmp_path)        # ω = 2: x(π) = x(0)
     ext1 = extension_of(tmp_path / "cache_probe")
-    assert stiffer.INFO["key"] != key0 and ext1 != ext0
-    assert stiffer.INFO["defaults"] == [4.0]
+    assert stiffer.INFO.key != key0 and ext1 != ext0
+    assert stiffer.INFO.defaults == (4.0,)
     # the new default is what the new build uses (no params given)
     r0 = base.integrate([[1.0], [np.cos(h)]], N, h)
     r1 = stiffer.integrate([[1.0], [np.cos(2 * h)]], N, h)
@@ -237,7 +237,7 @@ def test_changed_default_or_lagrangian_rebuilds(tmp_path):
 
     quartic = compile_model(oscillator(4.0, quartic=True), tmp_path)
     ext2 = extension_of(tmp_path / "cache_probe")
-    assert quartic.INFO["key"] not in (key0, stiffer.INFO["key"]) and ext2 not in (ext0, ext1)
+    assert quartic.INFO.key not in (key0, stiffer.INFO.key) and ext2 not in (ext0, ext1)
     r2 = quartic.integrate([[1.0], [np.cos(2 * h)]], N, h)
     assert abs(r2.q[-1, 0] - 1.0) > 1e-2                      # different dynamics
     # only the current build is left in the package directory, and beside it only the

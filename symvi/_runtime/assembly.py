@@ -13,6 +13,7 @@ import numpy as np
 from .band import factor, lu_solve, positive_definite, reciprocal_condition
 from .gauge import Gauge
 from .lifted import LIFT_FROM, LiftedSystem
+from .model_info import Kernel
 from .paths import Path
 
 
@@ -34,7 +35,7 @@ class Problem:
         #: An optimal-control problem minimises its cost: Newton steps are then globalised
         #: on the cost itself, or with constraints on its ℓ1 exact penalty (see
         #: :func:`.globalisation.descent_step`).
-        self.minimise = bool(model.info.get("controls"))
+        self.minimise = bool(model.info.controls)
         self.shift, self.penalty = 0.0, 0.0
         #: Whether the last step was a full, unshifted Newton step from an iterate whose
         #: Hessian was positive definite (:func:`.globalisation.descent_step`).
@@ -51,7 +52,7 @@ class Problem:
 
     def merit(self, path: Path) -> tuple[float, float]:
         """The cost S = Σ L_d and the size of its rounding error."""
-        terms = self.model.along_vector("lagrangian", path.x, path.f, self.h, self.p)
+        terms = self.model.along_vector(Kernel.LAGRANGIAN, path.x, path.f, self.h, self.p)
         return float(terms.sum()), float(np.abs(terms).sum()) * 64 * np.finfo(float).eps
 
     def assemble(self, path: Path, with_jacobian: bool):
@@ -68,7 +69,7 @@ class Problem:
         code = m.lib.symvi_bvp_assemble(m.ptr(path.x), m.ptr(path.f), m.ptr(path.lam),
                                         m.ptr(path.nu), n_nodes, m.ptr(self.p), self.h, m.ptr(res),
                                         m.ptr(ab.T) if with_jacobian else m.ffi.NULL)
-        if with_jacobian and m.info.get("gauges"):
+        if with_jacobian and m.info.gauges:
             if self.gauge is None:
                 self.gauge = Gauge(m, n_nodes)
             self.gauge.update(path, self.p, self.h)
@@ -120,7 +121,7 @@ class Problem:
         return positive_definite(self.model, ab, bw, shift)
 
     def _uses_lifted(self, n_nodes: int) -> bool:
-        if not self.model.info.get("lifted"):
+        if not self.model.info.lifted:
             return False
         return n_nodes - 1 >= LIFT_FROM if self.lifted is None else self.lifted
 

@@ -19,6 +19,7 @@ from __future__ import annotations
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
+from .model_info import Kernel
 from .paths import Path
 
 #: Fraction-to-the-boundary parameter's floor: a step keeps s and z at least (1 − τ) of
@@ -32,7 +33,7 @@ class Inequalities:
 
     def __init__(self, model, n_nodes: int):
         self.model, self.n_nodes = model, n_nodes
-        self.names: tuple[str, ...] = tuple(model.info["inequalities"])
+        self.names: tuple[str, ...] = model.info.inequalities
         r, n = model.order, model.n
         self.windows = n_nodes - r
         self.values = np.zeros((self.windows, len(self.names)))
@@ -100,14 +101,14 @@ def check_boundary_data(model, path: Path, p, h: float) -> None:
     keep-out zone — evaluated on that element by the first-order rule (the ``boundary``
     kernel): no path from such ends satisfies the bounds where they start, and the
     interior point would only stall on them."""
-    names = model.info.get("boundary_inequalities", ())
+    names = model.info.boundary_inequalities
     if not names:
         return
     r, N = model.order, path.f.shape[0]
     final = range(N, N) if model.end_free else range(N - r + 1, N)   # an unknown end: a guess
     for end, elements in (("start", range(0, r - 1)), ("end", final)):
         for e in elements:
-            c = model.along_vector("boundary", path.x[e:e + 2], path.f[e:e + 1], h, p)[0]
+            c = model.along_vector(Kernel.BOUNDARY, path.x[e:e + 2], path.f[e:e + 1], h, p)[0]
             k = int(np.argmax(c))
             if c[k] > BOUNDARY_TOLERANCE * (1.0 + abs(c[k])):
                 raise ValueError(

@@ -261,10 +261,10 @@ def result_bytes(model, n_steps: int, from_states: bool) -> float:
     fibre, the multipliers, controls, bound multipliers and active flags of its window;
     from States also the solved states and their times."""
     info = model.info
-    configuration = info["configuration_dim"]
+    configuration = info.configuration_dim
     inequalities = len(model.inequalities)
     per_node = 8 * (1 + model.m + configuration + model.n + model.constraints
-                    + int(info.get("controls") or 0) + inequalities) + inequalities
+                    + info.controls + inequalities) + inequalities
     if from_states:
         per_node += 8 * (1 + model.m + configuration + model.n)
     return float((n_steps + 1 + from_states) * per_node)

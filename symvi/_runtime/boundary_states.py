@@ -4,7 +4,7 @@ midpoint is the state.
 A second-order problem fixes its first and last elements, two nodes each. A state
 (position, velocity) at t = 0 fixes the element whose midpoint it is: where each fibre
 coordinate copies a base coordinate of the next node (a pair groupoid, as the package
-records in ``INFO["fibre_nodes"]``) q₀ = q − h v/2 and q₁ = q + h v/2; on a matrix Lie
+records in ``INFO.fibre_nodes``) q₀ = q − h v/2 and q₁ = q + h v/2; on a matrix Lie
 group g₀ = g τ(−hξ/2) and g₁ = g₀ τ(hξ), so that the increment is ξ and the midpoint
 g₀ τ(hξ/2) is g (τ(−a) = τ(a)⁻¹ for the Cayley map and the exponential). Element k is then the state at t_k = k·h, k = 0 … N, on
 [0, T = N·h], and the nodes sit at the half steps t = (k − ½)h, k = 0 … N + 1.
@@ -25,22 +25,23 @@ import numpy as np
 
 from . import arguments
 from .geometry import check_base_points, check_configurations
+from .model_info import Kernel
 from .paths import node_velocities
 from .results import BVPResult, State
 
 
 def _moves_nodes(model) -> bool:
     """Whether every fibre coordinate is a copy of a base coordinate at the target node and
-    every base coordinate is copied (``INFO["fibre_nodes"]``; a pair groupoid): then a
+    every base coordinate is copied (``INFO.fibre_nodes``; a pair groupoid): then a
     state's velocity moves the base point, x ∓ h v/2."""
-    nodes = np.asarray(model.info["fibre_nodes"], dtype=int)
+    nodes = np.asarray(model.info.fibre_nodes, dtype=int)
     return bool((nodes >= 0).all()) and sorted(nodes.tolist()) == list(range(model.m))
 
 
 def _base_rate(model, v: np.ndarray) -> np.ndarray:
     """ẋ of a state of velocity v: v_a moves the base coordinate its fibre copies."""
     rate = np.zeros(model.m)
-    rate[np.asarray(model.info["fibre_nodes"], dtype=int)] = v
+    rate[np.asarray(model.info.fibre_nodes, dtype=int)] = v
     return rate
 
 
@@ -61,15 +62,15 @@ def check_supported(model) -> None:
                          f"an order-{model.order} problem fixes its end nodes only (positions)")
     if not (_moves_nodes(model) or model.m == 0):
         raise ValueError(f"model {name!r}: States as boundary data need a pair groupoid or "
-                         f"matrix Lie groups (this is a {model.info['kind']} groupoid); give "
+                         f"matrix Lie groups (this is a {model.info.kind} groupoid); give "
                          f"the first and last two nodes")
-    if model.m and "manifold" in model.info["kernels"]:
+    if model.m and model.info.has_kernel(Kernel.MANIFOLD):
         raise ValueError(f"model {name!r}: its positions lie on a declared manifold, which "
                          f"q ∓ hv/2 leaves; give the first and last two nodes")
     if model.end_free or model.end_count:
         raise ValueError(f"model {name!r}: its end is free or given by end conditions; give "
                          f"the start as nodes (a State fixes both ends)")
-    if model.info.get("free_horizon"):
+    if model.info.free_horizon:
         raise ValueError(f"model {name!r}: with a free final time the boundary data are "
                          f"nodes; States fix the horizon's ends at t = 0 and t = T")
 

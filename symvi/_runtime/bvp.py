@@ -27,6 +27,7 @@ from .gauge import check_boundary
 from .horizon import free_horizon
 from .bounded import bounded
 from .diagnosis import diagnose
+from .model_info import Kernel
 from .newton import newton
 from .optimality import second_order
 from .options import SolveOptions
@@ -40,9 +41,9 @@ def solve_steps(model, n_steps: int, from_states: bool) -> int:
     solve (and take States as boundary data where they are given), and N leaves a free
     node between the fixed ends."""
     info = model.info
-    if not info["whole_trajectory"]:
+    if not info.whole_trajectory:
         raise ValueError(f"model {model.name!r}: no whole-trajectory solve on kind "
-                         f"{info['kind']!r}")
+                         f"{info.kind!r}")
     if from_states:
         boundary_states.check_supported(model)
     r = model.order
@@ -84,7 +85,7 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
         horizon (``optimal_control(..., time_cost=ρ)``) the first guess of it, the
         result's ``T`` (``t[-1]``) the optimal horizon (:mod:`.horizon`).
     params : parameter overrides (mapping name → value); the others keep the defaults
-        compiled in (``INFO["defaults"]``).
+        compiled in (``INFO.defaults``).
     guess : the free nodes r … N−r in the same layout (from States: nodes 2 … N − 1 of the
         N + 2, N − 2 of them), or how to interpolate them between
         the fixed ends: ``"cubic"`` (default) matches the end velocities as well as the
@@ -146,7 +147,7 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
                  boundary_states.element_nodes(model, end, h, "end"))
         result = boundary_states.attach(model, fixed_horizon(
             model, *nodes, N + 1, h, p, guess, options), h)
-    elif info.get("free_horizon"):
+    elif info.free_horizon:
         result = free_horizon(
             lambda step, previous: fixed_horizon(model, start, end, N, step, p, (
                 guess if previous is None else previous), options),
@@ -170,7 +171,7 @@ def fixed_horizon(model, start, end, N: int, h: float, p, guess,
         active = None if cold or guess.active is None \
             or guess.active.shape != path.lam[:, model.constraints:].shape else guess.active
         return bounded(problem, path, options, cold, active)
-    if model.info.get("gauges"):
+    if model.info.gauges:
         check_boundary(model, path, problem.perturbed(path), p, h)
     path, norms, steps, status, message = newton(problem, path, options)
     if status == Status.SUCCESS and problem.minimise:
@@ -267,13 +268,13 @@ def _conditioning(problem: Problem, path: Path, status: Status) -> str:
 def _result(model, path: Path, p, h, common: dict) -> BVPResult:
     r = model.order
     windows = path.f.shape[0] - r + 1
-    cost = float(model.along_vector("lagrangian", path.x, path.f, h, p).sum())
-    controls = (model.along_vector("controls", path.x, path.f, h, p)
-                if model.info["controls"] else None)
+    cost = float(model.along_vector(Kernel.LAGRANGIAN, path.x, path.f, h, p).sum())
+    controls = (model.along_vector(Kernel.CONTROLS, path.x, path.f, h, p)
+                if model.info.controls else None)
     return BVPResult(x=path.x if model.m else None, f=path.f,
                      g=model.configurations(path.g) if model.matrix_dims else None,
                      multipliers=path.lam if model.constraints else None,
                      end_multipliers=path.nu[:model.end_count].copy()
                      if model.end_count else None,
                      controls=controls, cost=cost if windows > 0 else 0.0,
-                     kind=model.info["kind"], **common)
+                     kind=model.info.kind, **common)

@@ -12,6 +12,7 @@ from .bvp import solve_bvp
 from .bvp_batch import continuation, solve_bvp_many
 from .geometry import check_configurations
 from .legendre import first_fibres, state_arrays
+from .model_info import Kernel, KernelInfo, ModelInfo, kernel_name
 from .options import SolveOptions, StepOptions
 from .paths import increments, initial_layout
 from .results import State
@@ -36,36 +37,39 @@ def _documented_by(function: Callable) -> Callable:
 class CompiledModel:
     """Wraps the cffi ``ffi``/``lib`` of one generated extension.
 
-    ``info`` is the metadata written by symvi: name, kind, order, source_dim (m),
-    fibre_dim (n), parameters, defaults, kernels (name → z length and output sizes),
-    has_energy, bvp.
+    ``info`` is what symvi wrote about the model (:class:`.model_info.ModelInfo`: name,
+    kind, order, source_dim (m), fibre_dim (n), parameters, defaults, kernels, …), read by
+    attribute.
     """
 
     #: The options of the whole-trajectory solve and of the step map (``options=`` of
     #: :meth:`solve_bvp` and :meth:`integrate`), this package's own classes.
     SolveOptions, StepOptions = SolveOptions, StepOptions
 
-    def __init__(self, ffi, lib, info: Mapping):
-        self.ffi, self.lib, self.info = ffi, lib, dict(info)
-        self.name: str = info["name"]
-        self.order: int = info["order"]
-        self.m: int = info["source_dim"]
-        self.n: int = info["fibre_dim"]
+    def __init__(self, ffi, lib, info: ModelInfo):
+        if not isinstance(info, ModelInfo):
+            raise TypeError(f"info must be a ModelInfo (ModelInfo.from_literal), not "
+                            f"{type(info).__name__}")
+        self.ffi, self.lib, self.info = ffi, lib, info
+        self.name: str = info.name
+        self.order: int = info.order
+        self.m: int = info.source_dim
+        self.n: int = info.fibre_dim
         #: s, the constraints per window (multipliers λ^k ∈ R^s).
-        self.constraints: int = info.get("constraints", 0)
+        self.constraints: int = info.constraints
         #: Per fibre coordinate: whether it is an increment over h (a group factor's ξ).
-        self.step_scaled = np.array(info.get("step_scaled") or [False] * self.n, dtype=bool)
+        self.step_scaled = np.array(info.step_scaled or [False] * self.n, dtype=bool)
         self.step_scaled.flags.writeable = False
         #: Whether the last nodes are unknowns, and the number of end conditions ψ = 0.
-        self.end_free = bool(info.get("end_free"))
-        self.end_count = len(info.get("end_conditions") or ())
+        self.end_free = info.end_free
+        self.end_count = len(info.end_conditions)
         #: The inequalities c ≤ 0 of every window (bounded optimal control), by name.
-        self.inequalities: tuple[str, ...] = tuple(info.get("inequalities", ()))
-        self.parameter_names: tuple[str, ...] = tuple(info["parameters"])
-        self.parameter_defaults: tuple[float, ...] = tuple(info["defaults"])
+        self.inequalities: tuple[str, ...] = info.inequalities
+        self.parameter_names: tuple[str, ...] = info.parameters
+        self.parameter_defaults: tuple[float, ...] = info.defaults
 
     def __repr__(self) -> str:
-        return (f"<symvi model {self.name!r}: {self.info['kind']} groupoid, order {self.order}, "
+        return (f"<symvi model {self.name!r}: {self.info.kind} groupoid, order {self.order}, "
                 f"n={self.n}, parameters {dict(zip(self.parameter_names, self.parameter_defaults))}>")
 
     @property
@@ -79,44 +83,44 @@ class CompiledModel:
 
     def params(self, given=None) -> np.ndarray:
         return arguments.parameters(self.parameter_names, self.parameter_defaults, given,
-                                    self.info.get("parameter_signs", ()))
+                                    self.info.parameter_signs)
 
-    def evaluate(self, kernel: str, z, h: float,
+    def evaluate(self, kernel: Kernel | str, z, h: float,
                  params: Mapping[str, float] | None = None) -> tuple[np.ndarray, ...]:
         """Evaluate one compiled kernel at stencil coordinates ``z``.
 
         ``kernel``: ``step`` (residual, ∂R/∂f_{K−1}), ``stencil`` (residual, ∂R/∂z),
         ``predict``, ``target``, ``momentum_plus``, ``momentum_minus``, ``lagrangian`` and,
-        for first-order models, ``energy`` (all of them: ``INFO["kernels"]``). ``z``: the
-        kernel's coordinates (base point, then elements; its length
-        ``INFO["kernels"][kernel]["nz"]``), ``h`` the step, ``params`` parameter overrides
-        (mapping name → value). Returns the outputs as arrays (Jacobians as matrices).
+        for first-order models, ``energy`` (all of them: ``INFO.kernel_names``; a
+        :class:`.model_info.Kernel` or its name). ``z``: the kernel's coordinates (base
+        point, then elements; its length ``INFO.kernel(kernel).nz``), ``h`` the step,
+        ``params`` parameter overrides (mapping name → value). Returns the outputs as
+        arrays (Jacobians as matrices).
         """
-        spec = self.info["kernels"].get(kernel)
-        if spec is None:
-            raise ValueError(f"unknown kernel {kernel!r}; known: {sorted(self.info['kernels'])}")
-        z = arguments.finite_array(z, (spec["nz"],), f"stencil z of kernel {kernel!r}")
+        spec = self.info.kernel(kernel)
+        z = arguments.finite_array(z, (spec.nz,), f"stencil z of kernel {spec.name!r}")
         outs = self.kernel_outputs(kernel, z, self.params(params), arguments.step_size(h))
         if len(outs) == 2:
             outs[1] = outs[1].reshape(outs[0].size, -1)
         return tuple(outs)
 
-    def kernel_outputs(self, kernel: str, z: np.ndarray, p: np.ndarray,
+    def kernel_outputs(self, kernel: Kernel | str, z: np.ndarray, p: np.ndarray,
                        h: float) -> list[np.ndarray]:
         """The flat outputs of the compiled ``kernel`` at the float64 coordinates ``z``,
         the parameter vector ``p`` already assembled (:meth:`params`) and ``h`` checked:
         :meth:`evaluate` without its argument checks, for the runtime's own calls."""
-        outs = [np.zeros(size) for size in self.info["kernels"][kernel]["outputs"]]
-        getattr(self.lib, f"symvi_{kernel}")(self.ptr(np.ascontiguousarray(z)), self.ptr(p),
-                                             h, *[self.ptr(o) for o in outs])
+        spec = self.info.kernel(kernel)
+        outs = [np.zeros(size) for size in spec.outputs]
+        getattr(self.lib, f"symvi_{spec.name}")(self.ptr(np.ascontiguousarray(z)), self.ptr(p),
+                                                h, *[self.ptr(o) for o in outs])
         return outs
 
-    def along(self, kernel: str, x: np.ndarray, f: np.ndarray, h: float, params=None,
+    def along(self, kernel: Kernel | str, x: np.ndarray, f: np.ndarray, h: float, params=None,
               windows: int | None = None) -> np.ndarray:
         """Evaluate a kernel's first output on every window of consecutive elements."""
         return self.along_vector(kernel, x, f, h, self.params(params), windows)
 
-    def along_vector(self, kernel: str, x: np.ndarray, f: np.ndarray, h: float,
+    def along_vector(self, kernel: Kernel | str, x: np.ndarray, f: np.ndarray, h: float,
                      p: np.ndarray, windows: int | None = None) -> np.ndarray:
         """:meth:`along` with the parameter vector ``p`` already assembled.
 
@@ -125,34 +129,35 @@ class CompiledModel:
         spec = self._along_spec(kernel)
         x = np.ascontiguousarray(x, dtype=np.float64)
         f = np.ascontiguousarray(f, dtype=np.float64)
-        available = self._windows_available(kernel, x, f)
+        available = self._windows_available(spec, x, f)
         windows = available if windows is None else windows
         if windows > available:
-            raise ValueError(f"kernel {kernel!r}: {windows} windows asked, but the path "
+            raise ValueError(f"kernel {spec.name!r}: {windows} windows asked, but the path "
                              f"holds {max(available, 0)} (elements f: {f.shape}, base "
                              f"points x: {x.shape})")
-        out = np.zeros((max(windows, 0), spec["outputs"][0]))
+        out = np.zeros((max(windows, 0), spec.outputs[0]))
         if windows > 0:
-            getattr(self.lib, f"symvi_{kernel}_path")(self.ptr(x), self.ptr(f), windows,
-                                                      self.ptr(p), arguments.step_size(h),
-                                                      self.ptr(out))
+            getattr(self.lib, f"symvi_{spec.name}_path")(self.ptr(x), self.ptr(f), windows,
+                                                         self.ptr(p), arguments.step_size(h),
+                                                         self.ptr(out))
         return out
 
-    def _along_spec(self, kernel: str) -> dict:
-        spec = self.info["kernels"].get(kernel)
-        if spec is None or not hasattr(self.lib, f"symvi_{kernel}_path"):
-            along = sorted(k for k in self.info["kernels"] if hasattr(self.lib, f"symvi_{k}_path"))
-            raise ValueError(f"kernel {kernel!r} cannot be evaluated along a path; "
+    def _along_spec(self, kernel: Kernel | str) -> KernelInfo:
+        name = kernel_name(kernel)
+        if not self.info.has_kernel(name) or not hasattr(self.lib, f"symvi_{name}_path"):
+            along = sorted(k for k in self.info.kernel_names
+                           if hasattr(self.lib, f"symvi_{k}_path"))
+            raise ValueError(f"kernel {name!r} cannot be evaluated along a path; "
                              f"those that can: {along}")
-        return spec
+        return self.info.kernel(name)
 
-    def _windows_available(self, kernel: str, x: np.ndarray, f: np.ndarray) -> int:
+    def _windows_available(self, spec: KernelInfo, x: np.ndarray, f: np.ndarray) -> int:
         """Windows of the kernel's width in the path: window i reads base point i and
         elements i … i + width − 1."""
-        width = (self.info["kernels"][kernel]["nz"] - self.m) // self.n
+        width = spec.width(self.m, self.n)
         rows = {name: a.shape[0] if a.ndim else 0 for name, a in (("x", x), ("f", f))}
         if f.size != rows["f"] * self.n or (self.m and x.size != rows["x"] * self.m):
-            raise ValueError(f"kernel {kernel!r}: the path must be base points x (nodes, "
+            raise ValueError(f"kernel {spec.name!r}: the path must be base points x (nodes, "
                              f"{self.m}) and elements f (elements, {self.n}), got x "
                              f"{x.shape} and f {f.shape}")
         windows = rows["f"] - width + 1
@@ -169,8 +174,8 @@ class CompiledModel:
         r, n = self.order, self.n
         if f.shape[0] - (2 * r - 1) + 1 < r:
             return np.zeros((0, n) if r == 1 else (0, r, n))
-        minus = self.along("momentum_minus", x, f, h, params, windows=r).reshape(-1, r, n)
-        plus = self.along("momentum_plus", x, f, h, params).reshape(-1, r, n)
+        minus = self.along(Kernel.MOMENTUM_MINUS, x, f, h, params, windows=r).reshape(-1, r, n)
+        plus = self.along(Kernel.MOMENTUM_PLUS, x, f, h, params).reshape(-1, r, n)
         states = np.concatenate([minus, plus])
         return states[:, 0, :] if r == 1 else states
 
@@ -178,10 +183,10 @@ class CompiledModel:
                 params: Mapping[str, float] | None = None) -> np.ndarray | None:
         """Conserved quantities F_Z of the declared symmetries (paper §4.4) at nodes
         r−1, r, … of the path ``x``, ``f`` (step ``h``, parameter overrides ``params``), one
-        column per name in ``info["symmetries"]``; None without symmetries."""
-        if not self.info.get("symmetries"):
+        column per name in ``info.symmetries``; None without symmetries."""
+        if not self.info.symmetries:
             return None
-        return self.along("noether", x, f, h, params)
+        return self.along(Kernel.NOETHER, x, f, h, params)
 
     @_documented_by(integrate)
     def integrate(self, initial, n_steps: int, h: float, params=None, **options):
@@ -213,7 +218,7 @@ class CompiledModel:
     @property
     def matrix_dims(self) -> tuple[int, ...]:
         """Sizes d of the matrix-group factors whose configurations are reconstructed."""
-        return tuple(self.info["matrix_dims"])
+        return self.info.matrix_dims
 
     def configurations(self, g: np.ndarray):
         """Split flat configurations (steps × Σd²) into (steps, d, d) arrays, one per group

@@ -128,7 +128,7 @@ def diagnose(problem, path: Path) -> ConstraintDiagnosis | None:
     gauges, or A is too large to decompose densely."""
     model = problem.model
     rows = problem.constraint_rows(path) if model.constraints or model.end_count else None
-    if rows is None or model.info.get("gauges") or (~rows).sum() > DENSE_LIMIT:
+    if rows is None or model.info.gauges or (~rows).sum() > DENSE_LIMIT:
         return None
     res, ab, bw, finite = problem.assembled(path)
     if not finite:
@@ -168,8 +168,8 @@ def _involved(model, weight: np.ndarray) -> tuple[tuple[str, ...], list[int]]:
     s, ends = model.constraints, model.end_count
     per_window = weight[:weight.size - ends].reshape(-1, s).sum(axis=0) if s else np.zeros(0)
     totals = np.concatenate([per_window, weight[weight.size - ends:]])
-    names = list(model.info.get("constraint_names") or [f"constraint {a + 1}" for a in range(s)])
-    names += [f"end condition {name!r}" for name in model.info.get("end_conditions", [])]
+    names = list(model.info.constraint_names or [f"constraint {a + 1}" for a in range(s)])
+    names += [f"end condition {name!r}" for name in model.info.end_conditions]
     chosen = [a for a in range(totals.size) if totals[a] >= 0.05 * totals.sum()]
     return tuple(names[a] for a in chosen), [a for a in chosen if a < s]
 
@@ -181,7 +181,7 @@ def _motion(problem, path: Path, involved: list[int], size: float) -> tuple:
     control, whose constraints are the unactuated directions in order
     (:attr:`ControlSystem.unactuated`)."""
     model = problem.model
-    directions = model.info.get("unactuated")
+    directions = model.info.unactuated
     if not directions:
         return ()
     N = path.x.shape[0] - 1
@@ -197,5 +197,5 @@ def _motion(problem, path: Path, involved: list[int], size: float) -> tuple:
             continue
         values = (float(chord[0, A]), float(path.f[0, A]), float(path.f[-1, A]))
         if max(map(abs, values)) > 1e-12 * size:
-            out.append((model.info["constraint_names"][a], *values))
+            out.append((model.info.constraint_names[a], *values))
     return tuple(out)

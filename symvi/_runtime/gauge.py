@@ -22,12 +22,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from .model_info import Kernel
+
 
 class Gauge:
     """The gauge condition at the middle window of a path of ``n_nodes`` nodes."""
 
     def __init__(self, model, n_nodes: int):
-        self.model, self.count = model, len(model.info.get("gauges", ()))
+        self.model, self.count = model, len(model.info.gauges)
         self.window = (n_nodes - 2) // 2
         n, s = model.n, model.constraints
         # window w's multipliers and constraint rows sit in block w + 1 of the layout
@@ -38,7 +40,7 @@ class Gauge:
     def update(self, path, p, h) -> None:
         """Q and λ^w at ``path`` (the point where the Jacobian was assembled)."""
         w, s = self.window, self.model.constraints
-        Z = self.model.along_vector("gauge", path.x[w:w + 2], path.f[w:w + 2], h, p)
+        Z = self.model.along_vector(Kernel.GAUGE, path.x[w:w + 2], path.f[w:w + 2], h, p)
         Z = Z.reshape(self.count, s).T
         u, sigma, _ = np.linalg.svd(Z, full_matrices=False)
         self.basis = u[:, sigma > 1e-12 * max(sigma.max(initial=0.0), 1.0)]
@@ -82,9 +84,9 @@ class Gauge:
 
 def _dependency_sums(model, path, h, p) -> tuple[np.ndarray, np.ndarray]:
     """(Σ_k Z(x_k)·Φ_d^k, Σ_k |Z(x_k)·Φ_d^k|) per gauge symmetry along ``path``."""
-    names = model.info["gauges"]
-    phi = model.along_vector("constraint", path.x, path.f, h, p)
-    Z = model.along_vector("gauge", path.x, path.f, h, p).reshape(phi.shape[0], len(names), -1)
+    names = model.info.gauges
+    phi = model.along_vector(Kernel.CONSTRAINT, path.x, path.f, h, p)
+    Z = model.along_vector(Kernel.GAUGE, path.x, path.f, h, p).reshape(phi.shape[0], len(names), -1)
     terms = np.einsum("wza,wa->zw", Z, phi)
     return terms.sum(axis=1), np.abs(terms).sum(axis=1)
 
@@ -95,7 +97,7 @@ def check_boundary(model, path, other, p, h, tol: float = 1e-9) -> None:
     vanishes (the ends' discrete momenta agree, so that Φ_d = 0 has a solution). Both up to
     ``tol``·(1 + Σ_k |Z(x_k)·Φ_d^k|): below that the solve reaches a residual of the size
     of the mismatch, which it reports."""
-    names = model.info["gauges"]
+    names = model.info.gauges
     (first, size), (second, size2) = _dependency_sums(model, path, h, p), \
         _dependency_sums(model, other, h, p)
     for k, name in enumerate(names):

@@ -2,7 +2,7 @@
 points on their declared manifold.
 
 A configuration g (d×d) of a matrix-group factor must meet the conditions its Lie algebra
-fixes (``INFO["groups"]``, from :meth:`MatrixLieGroup.invariants`): gᵀJg = J, gKgᵀ = K,
+fixes (``INFO.groups``, from :meth:`MatrixLieGroup.invariants`): gᵀJg = J, gKgᵀ = K,
 gv = v, wᵀg = wᵀ and det g > 0 — for SO(3) orthogonality and determinant 1, for SE(n) an
 orthogonal rotation block and the last row (0, …, 0, 1). A base point must satisfy the
 equations of its manifold when the model declares them (the ``manifold`` kernel, e.g.
@@ -12,6 +12,8 @@ g = 2I is a fixed point of every step and the solve reports success.
 from __future__ import annotations
 
 import numpy as np
+
+from .model_info import Kernel
 
 #: Largest defect accepted, relative to the size of the data: configurations built in
 #: floating point (a product of rotations, a rotation from Euler angles) are off by
@@ -73,15 +75,16 @@ def check_configurations(model, g: np.ndarray, what: str, first: int = 0) -> Non
     """Raise ValueError when a configuration of ``g`` (nodes × Σd², flattened factor by
     factor) is off its group; node numbers start at ``first``."""
     at = 0
-    for d, group in zip(model.matrix_dims, model.info.get("groups", ())):
+    for d, group in zip(model.matrix_dims, model.info.groups):
         gs = g[:, at:at + d * d].reshape(-1, d, d)
-        bad = np.flatnonzero(~(group_defects(gs, group)[0].max(axis=1, initial=0.0) <= TOLERANCE))
+        defects = group_defects(gs, group.invariants)[0]
+        bad = np.flatnonzero(~(defects.max(axis=1, initial=0.0) <= TOLERANCE))
         if bad.size:
             k = int(bad[0])
-            defect, condition = group_defect(gs[k], group)
+            defect, condition = group_defect(gs[k], group.invariants)
             raise ValueError(
                 f"{what}: the configuration of node {first + k} is not on "
-                f"{group['label']}: {condition} fails by {defect:.3e} (tolerance "
+                f"{group.label}: {condition} fails by {defect:.3e} (tolerance "
                 f"{TOLERANCE:g}, relative); pass a configuration of the group "
                 f"(re-orthonormalise the rotation, e.g. by its polar decomposition)")
         at += d * d
@@ -90,10 +93,10 @@ def check_configurations(model, g: np.ndarray, what: str, first: int = 0) -> Non
 def check_base_points(model, x: np.ndarray, what: str, first: int = 0) -> None:
     """Raise ValueError when a base point of ``x`` (nodes × m) is off the manifold the
     model declares (its ``manifold`` kernel); nothing to check without one."""
-    if "manifold" not in model.info["kernels"] or not len(x):
+    if not model.info.has_kernel(Kernel.MANIFOLD) or not len(x):
         return
     for k, point in enumerate(np.ascontiguousarray(x, dtype=np.float64)):
-        values = model.evaluate("manifold", point, 1.0)[0]
+        values = model.evaluate(Kernel.MANIFOLD, point, 1.0)[0]
         with np.errstate(all="ignore"):         # huge data: an infinite defect, refused
             defect = _size(values) / (1.0 + np.float64(_size(point)) ** 2)
         if not defect <= TOLERANCE:

@@ -19,6 +19,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from .model_info import Kernel
 from .options import SolveOptions
 from .results import BVPResult, Status
 
@@ -28,7 +29,7 @@ def slope(model, result: BVPResult, p) -> float:
     N = result.t.size - 1
     h = float(result.t[1])
     x = result.x if result.x is not None else np.zeros((N + 1, 0))
-    values = model.along_vector("horizon", x, result.f, h, p)
+    values = model.along_vector(Kernel.HORIZON, x, result.f, h, p)
     lam = result.multipliers if result.multipliers is not None else np.zeros((len(values), 0))
     z = result.bound_multipliers if result.bound_multipliers is not None \
         else np.zeros((len(values), 0))
@@ -36,7 +37,7 @@ def slope(model, result: BVPResult, p) -> float:
     derivative = float((values[:, :weights.shape[1]] * weights).sum())
     if result.end_multipliers is not None:     # ν·∂ψ/∂h of the end conditions
         last = np.concatenate([x[-2], result.f[-1]])
-        derivative += float(model.kernel_outputs("end_horizon", last, p, h)[0]
+        derivative += float(model.kernel_outputs(Kernel.END_HORIZON, last, p, h)[0]
                             @ result.end_multipliers)
     return derivative / N + float(values[0, -1])
 

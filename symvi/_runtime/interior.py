@@ -35,6 +35,7 @@ import numpy as np
 from .band import cholesky_pivot
 from .barrier import Inequalities, next_barrier
 from .interior_steps import step
+from .model_info import Kernel
 from .optimality import Curvature, second_order
 from .options import SolveOptions
 from .paths import Path
@@ -432,9 +433,9 @@ class InteriorPoint:
             x=path.x if model.m else None, f=path.f,
             g=model.configurations(path.g) if model.matrix_dims else None,
             multipliers=np.array(path.lam[:, :s_count]) if s_count else None,
-            controls=model.along_vector("controls", path.x, path.f, h, p),
-            cost=float(model.along_vector("lagrangian", path.x, path.f, h, p).sum()),
-            kind=model.info["kind"], bound_multipliers=z, active=z > self.s,
+            controls=model.along_vector(Kernel.CONTROLS, path.x, path.f, h, p),
+            cost=float(model.along_vector(Kernel.LAGRANGIAN, path.x, path.f, h, p).sum()),
+            kind=model.info.kind, bound_multipliers=z, active=z > self.s,
             end_multipliers=path.nu[:model.end_count].copy() if model.end_count else None,
             inequalities=self.inequalities.names,
             history={k: np.array(v) for k, v in self.history.items()})

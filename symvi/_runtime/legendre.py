@@ -10,7 +10,7 @@ continuous one (Marsden & West 2001, §1.5):
 
 solved for f₀ by Newton's method on the compiled ``momentum_minus`` kernel and its
 Jacobian, from the explicit guess f₀ = q₀ + h v₀ (nodes) or f₀ = ξ₀ (increments), per
-fibre coordinate as the package records (``INFO["fibre_nodes"]``). The path
+fibre coordinate as the package records (``INFO.fibre_nodes``). The path
 from there is the discrete flow of the momentum-matched initial condition, so it
 approximates the solution from (q₀, v₀) at the method's order whatever h is, which a
 fixed pair of nodes does not (it fixes the velocity at h/2 to (q₁ − q₀)/h).
@@ -21,6 +21,7 @@ import numpy as np
 
 from . import arguments
 from .geometry import check_base_points
+from .model_info import Kernel
 from .paths import initial_layout
 
 #: Newton iterations of the transform, and the relative size of a converged correction.
@@ -37,7 +38,7 @@ class TransformError(ValueError):
 
 def state_arrays(model, state) -> tuple[np.ndarray, np.ndarray]:
     """The position x and velocity v of ``state``, checked (x on its manifold)."""
-    if model.order != 1 or "legendre" not in model.info["kernels"]:
+    if model.order != 1 or not model.info.has_kernel(Kernel.LEGENDRE):
         what = initial_layout(model).describe(model.stencil_elements, model.n)
         raise ValueError(f"model {model.name!r}: a State starts first-order models only "
                          f"(this one is of order {model.order}); give {what} instead")
@@ -60,11 +61,11 @@ def first_fibres(model, X: np.ndarray, V: np.ndarray, H: np.ndarray,
     :class:`TransformError` names the first state that fails."""
     c, n = len(X), model.n
     P = np.ascontiguousarray(P)
-    momentum = _points(model, "legendre", np.hstack([X, V]), P, H)[0]
+    momentum = _points(model, Kernel.LEGENDRE, np.hstack([X, V]), P, H)[0]
     F = guess(model, X, V, H)
     active = np.arange(c)
     for _ in range(MAXITER):
-        value, jacobian = _points(model, "momentum_minus", np.hstack([X[active], F[active]]),
+        value, jacobian = _points(model, Kernel.MOMENTUM_MINUS, np.hstack([X[active], F[active]]),
                                   P[active], H[active])
         J = jacobian.reshape(len(active), n, n)
         delta = _solve(J, momentum[active] - value, active, H)
@@ -83,9 +84,9 @@ def first_fibres(model, X: np.ndarray, V: np.ndarray, H: np.ndarray,
 
 
 def _fibre_nodes(model) -> np.ndarray:
-    """``INFO["fibre_nodes"]``: per fibre coordinate the base coordinate it copies at the
+    """``INFO.fibre_nodes``: per fibre coordinate the base coordinate it copies at the
     target node, or −1."""
-    return np.asarray(model.info["fibre_nodes"], dtype=int)
+    return np.asarray(model.info.fibre_nodes, dtype=int)
 
 
 def guess(model, X: np.ndarray, V: np.ndarray, H: np.ndarray) -> np.ndarray:
@@ -115,10 +116,10 @@ def _solve(J: np.ndarray, rhs: np.ndarray, active: np.ndarray, H: np.ndarray) ->
         raise
 
 
-def _points(model, kernel: str, Z: np.ndarray, P: np.ndarray, H: np.ndarray) -> list:
+def _points(model, kernel: Kernel, Z: np.ndarray, P: np.ndarray, H: np.ndarray) -> list:
     """The outputs of ``kernel`` at the rows of Z, each with its parameters and step."""
     Z, H = np.ascontiguousarray(Z), np.ascontiguousarray(H, dtype=float)
-    outs = [np.zeros((len(Z), size)) for size in model.info["kernels"][kernel]["outputs"]]
-    getattr(model.lib, f"symvi_{kernel}_points")(len(Z), model.ptr(Z), model.ptr(P), P.shape[1],
+    outs = [np.zeros((len(Z), size)) for size in model.info.kernel(kernel).outputs]
+    getattr(model.lib, f"symvi_{kernel.value}_points")(len(Z), model.ptr(Z), model.ptr(P), P.shape[1],
                                                  model.ptr(H), *[model.ptr(o) for o in outs])
     return outs

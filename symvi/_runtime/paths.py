@@ -8,7 +8,7 @@ the configurations, x_{k+1} = φ(x_k, g_k⁻¹g_{k+1}); :func:`check_consistent`
 they do not.
 
 A model's initial data for the step map come in the layout its groupoid names
-(``INFO["initial_layout"]``, :data:`INITIAL_LAYOUTS`): the first K nodes where an element
+(``INFO.initial_layout``, :data:`INITIAL_LAYOUTS`): the first K nodes where an element
 is the pair of its nodes, else the first base point, configurations and fibres.
 """
 from __future__ import annotations
@@ -331,15 +331,15 @@ INITIAL_LAYOUTS = {
 
 def initial_layout(model) -> InitialLayout:
     """The layout of ``model``'s initial data."""
-    return INITIAL_LAYOUTS[model.info["initial_layout"]]
+    return INITIAL_LAYOUTS[model.info.initial_layout]
 
 
 def node_velocities(model, x: np.ndarray, f: np.ndarray, h: float) -> np.ndarray:
     """The velocity of each element of a path (nodes x, fibres f), per fibre coordinate:
     the difference quotient (x_{k+1, j} − x_{k, j})/h of the base coordinate j the fibre
-    copies at the target node (``INFO["fibre_nodes"]``: a pair factor), else the fibre
+    copies at the target node (``INFO.fibre_nodes``: a pair factor), else the fibre
     itself (ξ on a group)."""
-    nodes = np.asarray(model.info["fibre_nodes"], dtype=int)
+    nodes = np.asarray(model.info.fibre_nodes, dtype=int)
     copies = nodes >= 0
     out = np.array(f, dtype=float, copy=True)
     if copies.any():

@@ -1,25 +1,40 @@
 """Result objects of the step map and the whole-trajectory solve (cf. ``solve_ivp``).
 
-One result type for every package of one runtime
-------------------------------------------------
-Each generated package carries its own copy of this file, and Python would give every copy
-its own classes: results of two packages would be different types and a pickled result
-would name the (private, per-folder) module of the package that made it. So the copies
-share one set of classes:
+Pickling: by name, from symvi
+-----------------------------
+Each generated package carries its own copy of this file, in a private module
+(``_symvi_<name>_<hash>._runtime.results``) that no other process can import. So a result
+does not pickle by its class: every class here pickles, through ``__reduce__``, as a call
+of :data:`HOME`'s ``_rebuild`` (a :class:`Status` as ``HOME.Status(value)``, a
+:class:`NewtonError` as ``HOME.NewtonError(result)``) with its fields by name, nested
+results, States and Statuses the same way. The pickle records that call as
+``getattr(importlib.import_module("symvi._runtime.results"), "_rebuild")``: loading it
+imports symvi's own copy of this file by name, with the standard library alone, whatever
+package made the result — the package itself is never needed. So:
 
-* The first copy imported in a process registers itself in ``sys.modules`` under the
-  canonical name :data:`CANONICAL`, ``symvi_runtime_results_<digest>``, the digest being
-  that of this file's bytes; every later copy with the same bytes rebinds its public names
-  (:data:`SHARED`) to that module's. ``symvi._runtime.results`` is one more copy, so symvi
-  takes part too.
-* The digest of the file, not symvi's version, decides what is shared: copies with equal
-  bytes define equal classes, and a runtime whose results changed gets its own name, so a
-  pickle never reaches a class with another layout.
-* Pickling goes through :func:`_rebuild`, which pickle finds as
-  ``symvi_runtime_results_<digest>._rebuild``; it rebuilds a result through its
-  constructor from the fields by name. Unpickling therefore works in any process that has
-  imported a generated package of this runtime, or ``symvi._runtime.results``; in one that
-  has imported neither, pickle raises ``ModuleNotFoundError`` naming the canonical module.
+* a result pickled in one process loads in any process that has symvi installed, with
+  ``import pickle`` alone; it loads as symvi's class (``symvi._runtime.results``), which
+  counts as the package's for ``isinstance`` (below);
+* where symvi is not installed (a package used standalone, with numpy and cffi), results
+  still pickle, but loading them raises ``ModuleNotFoundError: No module named 'symvi'``:
+  use the archive of :meth:`_Result.save` (``numpy.load`` reads it) to move results
+  without symvi;
+* ``HOME``'s names ``_rebuild``, ``Status`` and ``NewtonError`` and the fields' names are
+  the pickle format: ``_rebuild`` builds through the constructor, so a field added with
+  a default still loads older pickles;
+* ``copy.copy`` and ``copy.deepcopy`` call the same reduction but rebuild in this copy
+  (:class:`_Found` called here is this module's own), never importing symvi.
+
+Importing this file changes nothing outside it (no registration in ``sys.modules``).
+
+Classes of two copies
+---------------------
+The copies' classes are distinct objects (``type(a) is not type(b)`` for results of two
+packages). Their metaclass (:class:`_Shared`) makes ``isinstance`` and ``issubclass`` treat
+a class of another copy with the same name and the same fields (a Status: the same
+members) as this copy's: a :class:`State` made with ``symvi.State`` starts a package's run,
+a result of one package (or one loaded from a pickle) is another package's warm start.
+``except`` clauses match by identity only: catch a package's own ``NewtonError``.
 
 This file imports nothing of its package (its copies must be interchangeable) and needs
 numpy only.
@@ -27,25 +42,78 @@ numpy only.
 from __future__ import annotations
 
 import enum
-import hashlib
+import importlib
 import os
 import secrets
-import sys
-from dataclasses import dataclass, fields
+from dataclasses import dataclass, fields, is_dataclass
 
 import numpy as np
 
-
-def _canonical_name() -> str:
-    with open(__file__, "rb") as source:
-        return "symvi_runtime_results_" + hashlib.sha256(source.read()).hexdigest()[:16]
-
-
-#: Name of the module whose classes every copy of this file shares (see the docstring).
-CANONICAL = _canonical_name()
+#: The module a pickle names for every class of this file: symvi's own copy, imported
+#: by name when the pickle loads (see the docstring).
+HOME = "symvi._runtime.results"
 
 
-class Status(enum.IntEnum):
+class _Shared(type):
+    """Metaclass of the classes of this file: a class of another copy of it with the
+    same :meth:`symvi_layout` counts as this class for ``isinstance`` and ``issubclass``."""
+
+    def symvi_layout(cls) -> tuple:
+        """What two copies' classes must share to stand for each other: their name and
+        their fields (a Status: its members)."""
+        if issubclass(cls, enum.Enum):
+            parts = tuple((m.name, m.value) for m in cls)
+        elif is_dataclass(cls):
+            parts = tuple(f.name for f in fields(cls))
+        else:
+            parts = ()
+        return cls.__qualname__, parts
+
+    def __instancecheck__(cls, obj) -> bool:
+        return cls.__subclasscheck__(type(obj))
+
+    def __subclasscheck__(cls, sub) -> bool:
+        if type.__subclasscheck__(cls, sub):
+            return True
+        layout = cls.symvi_layout()
+        return any(getattr(type(k), "symvi_layout", None) is not None
+                   and type(k).symvi_layout(k) == layout
+                   for k in getattr(sub, "__mro__", ()))
+
+
+class _SharedEnum(_Shared, enum.EnumMeta):
+    """:class:`_Shared` for :class:`Status`, an enumeration."""
+
+
+class _Home:
+    """symvi's copy of this module (:data:`HOME`), in a pickle: loading imports it by
+    name."""
+
+    def __reduce__(self):
+        return importlib.import_module, (HOME,)
+
+
+@dataclass(frozen=True)
+class _Found:
+    """The attribute ``name`` of :data:`HOME`, in a pickle (loading imports HOME and
+    takes the attribute). Called here — by ``copy``, or by pickle's check that what it
+    records is callable — it is this copy's own."""
+
+    name: str
+
+    def __reduce__(self):
+        return getattr, (_Home(), self.name)
+
+    def __call__(self, *args):
+        return _LOCAL[self.name](*args)
+
+
+#: The three calls a pickle records, one object each: a pickle holding many results
+#: (a BVPBatch) spells each out once and refers back to it.
+_REBUILD, _STATUS, _NEWTON_ERROR = _Found("_rebuild"), _Found("Status"), _Found("NewtonError")
+
+
+class Status(enum.IntEnum, metaclass=_SharedEnum):
     """Outcome of a solve; the values match the C return codes."""
 
     SUCCESS = 0
@@ -64,8 +132,11 @@ class Status(enum.IntEnum):
     #: penalty stages reach stopped falling as the penalty grew (:mod:`.penalty`).
     INFEASIBLE = 9
 
+    def __reduce_ex__(self, protocol):
+        return _STATUS, (int(self),)
 
-class NewtonError(RuntimeError):
+
+class NewtonError(RuntimeError, metaclass=_Shared):
     """Newton's method failed; ``result`` holds the partial result and its message."""
 
     def __init__(self, result):
@@ -73,14 +144,26 @@ class NewtonError(RuntimeError):
         self.result = result
 
     def __reduce__(self):
-        return NewtonError, (self.result,)
+        return _NEWTON_ERROR, (self.result,)
 
 
 def _rebuild(kind: str, state: dict):
-    """A result of class ``kind`` from its fields (the target of pickling)."""
-    return {"StepResult": StepResult, "BVPResult": BVPResult, "BatchResult": BatchResult,
-            "BVPBatch": BVPBatch}[kind](
-        **state | {"status": Status(state["status"])})
+    """The object of class ``kind`` (a result or a :class:`State`) from its fields by
+    name: what a pickle of one calls (part of the pickle format, see the docstring)."""
+    cls = _REBUILT[kind]
+    unknown = set(state) - {f.name for f in fields(cls)}
+    if unknown:
+        raise TypeError(f"a pickled {kind} has fields this {kind} has not: "
+                        f"{', '.join(sorted(unknown))} (pickled by another version of symvi?)")
+    if "status" in state:
+        state = state | {"status": Status(state["status"])}
+    return cls(**state)
+
+
+def _reduce(obj) -> tuple:
+    """How ``obj`` (a result or a State) pickles: a call of :data:`HOME`'s ``_rebuild``
+    with its class's name and its fields."""
+    return _REBUILD, (type(obj).__name__, {f.name: getattr(obj, f.name) for f in fields(obj)})
 
 
 def _brief(values) -> str:
@@ -98,7 +181,7 @@ def _brief(values) -> str:
 
 
 @dataclass(frozen=True)
-class State:
+class State(metaclass=_Shared):
     """A state to start :func:`integrate` from instead of its first nodes (first-order
     models): the velocity ``v`` — q̇ on a pair groupoid, the body velocity ξ = g⁻¹ġ on a
     matrix Lie group — at the position ``x`` (a pair groupoid's q₀, an action groupoid's
@@ -117,9 +200,11 @@ class State:
     x: object = None
     g: object = None
 
+    __reduce__ = _reduce
 
-class _Result:
-    """What both result classes share: status checks, pickling and a short repr."""
+
+class _Result(metaclass=_Shared):
+    """What the result classes share: status checks, saving, pickling and a short repr."""
 
     status: Status
     message: str
@@ -150,9 +235,7 @@ class _Result:
             arrays.update(_entries(field.name, getattr(self, field.name)))
         write_npz(file, arrays)
 
-    def __reduce__(self):
-        state = {f.name: getattr(self, f.name) for f in fields(self)}
-        return _rebuild, (type(self).__name__, state | {"status": int(self.status)})
+    __reduce__ = _reduce
 
     def _summary(self, counts: str, final: dict) -> str:
         message = self.message if len(self.message) <= 100 else self.message[:99] + "…"
@@ -535,22 +618,7 @@ def _pad(arrays: list, pad) -> tuple[np.ndarray, np.ndarray]:
     return _join([a[None] for a in arrays], pad), np.array([len(a) for a in arrays])
 
 
-#: The names every copy of this file takes from the canonical module.
-SHARED = ("Status", "NewtonError", "State", "StepResult", "BVPResult", "BatchResult",
-          "BVPBatch", "_rebuild")
-
-
-def _share() -> None:
-    """Become the canonical module, or take the classes of the one already registered."""
-    this = sys.modules[__name__]
-    canonical = sys.modules.setdefault(CANONICAL, this)
-    if canonical is this:
-        # pickle finds classes and functions by ``__module__``: point it at the name
-        # every process with this runtime resolves
-        for name in SHARED:
-            globals()[name].__module__ = CANONICAL
-    else:
-        globals().update({name: getattr(canonical, name) for name in SHARED})
-
-
-_share()
+#: What :func:`_rebuild` builds, by the class's name.
+_REBUILT = {cls.__name__: cls for cls in (StepResult, BVPResult, BatchResult, BVPBatch, State)}
+#: What :class:`_Found` names, as this copy's own (its call here).
+_LOCAL = _REBUILT | {"_rebuild": _rebuild, "Status": Status, "NewtonError": NewtonError}

@@ -16,6 +16,7 @@ from typing import Mapping
 import numpy as np
 
 from . import arguments
+from .model_info import Kernel
 from .options import StepOptions
 from .results import State, Status, StepResult
 from .storage import Series, check_memory
@@ -62,7 +63,7 @@ def integrate(model, initial, n_steps: int, h: float, params: Mapping[str, float
         one).
     h : time step (> 0).
     params : parameter overrides (mapping name → value); the others keep the defaults
-        compiled in (``INFO["defaults"]``).
+        compiled in (``INFO.defaults``).
     maxiter, xtol, ftol : Newton stops when ‖Δf‖∞ ≤ xtol·(1 + ‖f‖∞) or ‖R‖∞ ≤ ftol.
     keep_every : store only the nodes 0, k, 2k, … and what belongs to them (the elements
         leaving them, their momenta, energies and conserved quantities, the iterations of
@@ -172,7 +173,7 @@ class _Quantity:
     in the first chunk)."""
 
     field: str
-    kernel: str
+    kernel: Kernel
     width: int
     shift: int = 0
     first: int = 0
@@ -190,24 +191,24 @@ def layout(model, quantities: bool = True) -> tuple[list[_Quantity],
     """
     r, n, K = model.order, model.n, model.stencil_elements
 
-    def width(kernel):
-        return (model.info["kernels"][kernel]["nz"] - model.m) // n
+    def width(kernel: Kernel) -> int:
+        return model.info.kernel(kernel).width(model.m, n)
 
-    w, G = width("momentum_plus"), model.info["configuration_dim"]
+    w, G = width(Kernel.MOMENTUM_PLUS), model.info.configuration_dim
     fields = {"x": (1, 0, (model.m,)), "f": (0, 0, (n,)), "newton_iterations": (1 - K, K, ())}
     if G:
         fields["g"] = (1, 0, (G,))
     if not quantities:
         return [], fields
-    derived = [_Quantity("momenta", "momentum_minus", w, 0, r),
-               _Quantity("momenta", "momentum_plus", w, r)]
+    derived = [_Quantity("momenta", Kernel.MOMENTUM_MINUS, w, 0, r),
+               _Quantity("momenta", Kernel.MOMENTUM_PLUS, w, r)]
     fields["momenta"] = (r - w + 1, 0, (n,) if r == 1 else (r, n))
-    if model.info["has_energy"]:
-        derived.append(_Quantity("energy", "energy", width("energy")))
-        fields["energy"] = (1 - width("energy"), 0, ())
-    if model.info.get("symmetries"):
-        derived.append(_Quantity("noether", "noether", width("noether")))
-        fields["noether"] = (1 - width("noether"), r - 1, (len(model.info["symmetries"]),))
+    if model.info.has_energy:
+        derived.append(_Quantity("energy", Kernel.ENERGY, width(Kernel.ENERGY)))
+        fields["energy"] = (1 - width(Kernel.ENERGY), 0, ())
+    if model.info.symmetries:
+        derived.append(_Quantity("noether", Kernel.NOETHER, width(Kernel.NOETHER)))
+        fields["noether"] = (1 - width(Kernel.NOETHER), r - 1, (len(model.info.symmetries),))
     return derived, fields
 
 
@@ -234,7 +235,7 @@ class _Run:
         self.model, self.n_steps, self.keep, self.p, self.h = model, n_steps, keep, p, h
         self.stop = stop
         m, n, K = model.m, model.n, model.stencil_elements
-        E, G = K - 1 + n_steps, model.info["configuration_dim"]
+        E, G = K - 1 + n_steps, model.info.configuration_dim
         self.G = G
         self.quantities, self.fields = layout(model, quantities)
         self.series = {name: Series.empty(E + lag, offset, keep, shape,

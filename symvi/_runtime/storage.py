@@ -71,9 +71,9 @@ def bytes_per_node(model, quantities: bool = True) -> int:
     iterations and, with ``quantities``, the momenta (r·n at second order), energy and
     conserved quantities."""
     info = model.info
-    derived = (model.order * model.n + int(info["has_energy"])
-               + len(info.get("symmetries") or ())) if quantities else 0
-    return 8 * (model.m + model.n + info["configuration_dim"] + 1 + derived) + 4
+    derived = (model.order * model.n + int(info.has_energy)
+               + len(info.symmetries)) if quantities else 0
+    return 8 * (model.m + model.n + info.configuration_dim + 1 + derived) + 4
 
 
 def check_memory(model, elements: int, keep: int, buffered: int,
@@ -100,9 +100,9 @@ def check_path_memory(model, n_steps: int) -> None:
     eight copies of the path (trial steps, results)."""
     B = model.n + model.constraints
     band = 3 * ((model.order + 1) * B - 1) + 1
-    path = model.m + model.info["configuration_dim"] + model.n + model.constraints
+    path = model.m + model.info.configuration_dim + model.n + model.constraints
     per_node = 2 * band * B + 8 * path
-    if model.info.get("lifted"):      # the lifted system (lifted.py): 3n + s per node
+    if model.info.lifted:      # the lifted system (lifted.py): 3n + s per node
         lifted = 3 * model.n + model.constraints
         per_node += 2 * (3 * (lifted + 2 * model.n - 1) + 1) * lifted
     needed = 8.0 * (n_steps + 1) * per_node

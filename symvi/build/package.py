@@ -19,6 +19,8 @@ from ..codegen.emit import CSource, environment
 from ..errors import BuildError
 from .files import write_file, writing
 from ..declaration.symbols import sign
+from .._runtime.model_info import VERSION as MODEL_INFO_VERSION
+from .._runtime.model_info import GroupInfo, Kernel, KernelInfo, ModelInfo
 
 #: The symvi package folder (its sources are part of the cache key).
 PACKAGE = Path(__file__).resolve().parent.parent
@@ -73,32 +75,37 @@ def fibre_nodes(dm: DerivedModel) -> list[int]:
     return nodes
 
 
-def info(dm: DerivedModel, key: str, description: str) -> dict:
-    """The ``INFO`` dict of the package: what the run-time needs to know of the model."""
-    return {
-        "name": dm.name, "kind": dm.kind, "order": dm.order, "source_dim": dm.source_dim,
-        "fibre_dim": dm.fibre_dim, "parameters": [str(s) for s in dm.parameters],
-        "defaults": list(dm.defaults),
-        "parameter_signs": [sign(s) for s in dm.parameters], "has_energy": dm.has_energy,
-        "initial_layout": dm.initial_layout,
-        "whole_trajectory": dm.whole_trajectory, "constraints": dm.constraint_count,
-        "constraint_names": list(dm.constraint_names), "unactuated": list(dm.unactuated),
-        "end_free": dm.end_free, "end_conditions": list(dm.end_names),
-        "controls": dm.control_count, "inequalities": list(dm.inequality_names),
-        "boundary_inequalities": list(dm.boundary_names),
-        "free_horizon": any(k.name == "horizon" for k in dm.kernels),
-        "step_scaled": list(dm.step_scaled),
-        "symmetries": list(dm.symmetries), "gauges": list(dm.gauges),
-        "lifted": bool(dm.fibre_sources),
-        "symvi_version": __version__, "key": key,
-        "configuration_dim": dm.c_context.configuration_dim,
-        "matrix_dims": [G.matrix_dim for G in dm.c_context.groups],
-        "groups": [{"label": G.label, **G.invariants} for G in dm.c_context.groups],
-        "fibre_nodes": fibre_nodes(dm),
-        "description": description,
-        "kernels": {k.name: {"nz": len(k.z), "outputs": [len(M) for _, M in k.outputs]}
-                    for k in dm.kernels},
-    }
+def info(dm: DerivedModel, key: str, description: str) -> ModelInfo:
+    """The package's ``INFO``: what the run time needs to know of the model, typed
+    (:class:`~symvi._runtime.model_info.ModelInfo`, written as its literal)."""
+    return ModelInfo(
+        version=MODEL_INFO_VERSION, name=dm.name, kind=dm.kind, order=dm.order,
+        source_dim=dm.source_dim, fibre_dim=dm.fibre_dim,
+        configuration_dim=dm.c_context.configuration_dim,
+        parameters=tuple(str(s) for s in dm.parameters), defaults=tuple(dm.defaults),
+        parameter_signs=tuple(sign(s) for s in dm.parameters), has_energy=dm.has_energy,
+        initial_layout=dm.initial_layout, whole_trajectory=dm.whole_trajectory,
+        lifted=bool(dm.fibre_sources), constraints=dm.constraint_count,
+        constraint_names=tuple(dm.constraint_names), unactuated=tuple(dm.unactuated),
+        end_free=dm.end_free, end_conditions=tuple(dm.end_names),
+        controls=dm.control_count, inequalities=tuple(dm.inequality_names),
+        boundary_inequalities=tuple(dm.boundary_names),
+        free_horizon=any(k.name == Kernel.HORIZON.value for k in dm.kernels),
+        step_scaled=tuple(dm.step_scaled), symmetries=tuple(dm.symmetries),
+        gauges=tuple(dm.gauges),
+        groups=tuple(GroupInfo(label=G.label, matrix_dim=G.matrix_dim,
+                               **{k: _nested(v) for k, v in G.invariants.items()})
+                     for G in dm.c_context.groups),
+        fibre_nodes=tuple(fibre_nodes(dm)),
+        kernels=tuple(KernelInfo(name=k.name, nz=len(k.z),
+                                 outputs=tuple(len(M) for _, M in k.outputs))
+                      for k in dm.kernels),
+        symvi_version=__version__, key=key, description=description)
+
+
+def _nested(value: Any) -> Any:
+    """Nested lists as nested tuples (a frozen :class:`GroupInfo`)."""
+    return tuple(map(_nested, value)) if isinstance(value, (list, tuple)) else value
 
 
 def _render_init(dm: DerivedModel, key: str, description: str, extension: str,
@@ -106,9 +113,12 @@ def _render_init(dm: DerivedModel, key: str, description: str, extension: str,
     env = environment()
     env.filters.update(pystring=python_string, pyliteral=python_literal)
     data = info(dm, key, description)
-    defaults = ", ".join(f"{n}={v:g}" for n, v in zip(data["parameters"], dm.defaults))
+    literal = data.to_literal()
+    if ModelInfo.from_literal(literal) != data:
+        raise BuildError(f"model {dm.name!r}: INFO does not read back as written")
+    defaults = ", ".join(f"{n}={v:g}" for n, v in zip(data.parameters, dm.defaults))
     return env.get_template("package_init.py.j2").render(
-        name=dm.name, version=__version__, kind=dm.kind, order=dm.order, info=data,
+        name=dm.name, version=__version__, kind=dm.kind, order=dm.order, info=literal,
         extension=extension, description=description, defaults_text=defaults or "none",
         version_folder=version, files=imported)
 

@@ -133,7 +133,7 @@ class NodeCopy:
     """Fibre coordinates f[f_offset : f_offset + dim] that are the element's target node's
     base coordinates x[x_offset : x_offset + dim] (a pair factor: the element is the pair
     of its nodes). The C copies them (``templates/fibres.c.j2``); the run time maps a
-    state (x, v) to such a fibre as x + h v (``INFO["fibre_nodes"]``)."""
+    state (x, v) to such a fibre as x + h v (``INFO.fibre_nodes``)."""
 
     x_offset: int
     f_offset: int
