@@ -198,7 +198,7 @@ def test_importing_packages_registers_no_shared_module(compiled):
 
 
 IMPORT_A_COPY = """
-    import dataclasses, enum, importlib, importlib.util, json, os, secrets, sys
+    import __future__, dataclasses, enum, importlib, importlib.util, json, os, secrets, sys
     import numpy
     before = set(sys.modules)
     spec = importlib.util.spec_from_file_location("a_copy_of_results", sys.argv[1])
