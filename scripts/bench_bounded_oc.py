@@ -59,7 +59,7 @@ def symvi_solve(module, start, end):
 
 def ipopt_problem(module, start, end, inertia):
     """(solver, x0, bounds of g) of the bounded discrete problem (module docstring)."""
-    from symvi._runtime.paths import initial_path
+    from symvi._runtime.core.paths import initial_path
 
     h = T / N
     L_d, step, end_defect, torque = casadi_functions(h, inertia, end[0])

@@ -88,8 +88,8 @@ def newton_iteration(module, start, end, N: int, sparse: bool = False):
     """One full Newton iteration on the problem at N, from the default initial path:
     assemble R and J in C, factorise and solve (band LU in C, or the SuperLU baseline),
     update the path in C and evaluate the new residual. Returns a callable."""
-    from symvi._runtime.assembly import Problem as _Problem
-    from symvi._runtime.paths import initial_path
+    from symvi._runtime.bvp.assembly import Problem as _Problem
+    from symvi._runtime.core.paths import initial_path
 
     model = module.model
     p, h = model.params(), T / N
@@ -255,7 +255,7 @@ def ipopt_solver(N: int):
     multiple shooting, to unknowns g_2 … g_{N−2} with g_{k+1} = g_k cay(hξ̂_k): these fix
     the g_k uniquely from the ξ (same feasible ξ, same cost, same discrete problem) and
     keep the KKT matrix sparse. Returns (solver, x0 from symvi's initial path)."""
-    from symvi._runtime.paths import initial_path
+    from symvi._runtime.core.paths import initial_path
 
     model, h = get(RIGID), T / N
     start, end = (np.asarray(a, float) for a in (model.example.start, model.example.end))

@@ -6,7 +6,7 @@ zero guess (every free node at the last start node) and 20 seeded smooth random
 perturbations of the default guess (``tests/battery.py``). Prints, per problem and N, the
 success rate, the statuses of the failures, the spread of the optimal cost over the
 successes (one minimum, or several local ones) and the wall time. Every SUCCESS has passed
-the solver's second-order test (a minimum, not a saddle: ``symvi/_runtime/optimality.py``).
+the solver's second-order test (a minimum, not a saddle: ``symvi/_runtime/bvp/optimality.py``).
 
 Run from the repository root: ``python scripts/robustness_bvp.py [problem ...]``.
 """

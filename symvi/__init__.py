@@ -11,8 +11,8 @@ from .errors import (BuildError, CacheWarning, CompilerNotFoundError,  # noqa: E
 from .groupoids import (SE2, SE3, SO3, ActionGroupoid, Groupoid, MatrixLieGroup,  # noqa: E402
                         PairGroupoid, ProductGroupoid)
 from .declaration.model import Example, Model, h  # noqa: E402
-from ._runtime.results import State  # noqa: E402
-from ._runtime.options import SolveOptions, StepOptions  # noqa: E402
+from ._runtime.core.results import State  # noqa: E402
+from ._runtime.core.options import SolveOptions, StepOptions  # noqa: E402
 from .declaration.symmetry import Symmetry  # noqa: E402
 from .declaration.control import euler_lagrange_operator, optimal_control  # noqa: E402
 from .declaration.nonholonomic import distribution, nonholonomic_control  # noqa: E402

@@ -15,8 +15,8 @@ from typing import Sequence
 
 import numpy as np
 
-from ._runtime.signs import SIGNS
-from ._runtime.options import SolveOptions, StepOptions
+from ._runtime.core.signs import SIGNS
+from ._runtime.core.options import SolveOptions, StepOptions
 from .declaration.symbols import sign
 
 #: What ``--output`` writes: a NumPy archive (``save``), whatever the name's suffix.
@@ -51,7 +51,7 @@ def flag_of(name: str) -> str:
 
 def add_option_flags(parser) -> None:
     """A flag for every option of :func:`option_fields`, its help the option's own
-    description (``_runtime/options.py``): a new option needs no edit here."""
+    description (``_runtime/core/options.py``): a new option needs no edit here."""
     group = parser.add_argument_group(
         "solver options", "Newton's options, of the step map (integrate) or of the whole-"
         "trajectory solve (optimal control); default: the solver's")
@@ -195,7 +195,7 @@ def fewest_steps(model, ex) -> tuple[int, str]:
     (``integrate``'s ``step_count``, ``solve_bvp``'s ``n_steps``) but before the build:
     an order-r integration's initial data spans 2r − 1 elements; a whole trajectory has r
     fixed nodes at each end (States: one element each) and a free node between."""
-    from ._runtime.results import State
+    from ._runtime.core.results import State
     r = model.order
     if not ex.whole_trajectory:
         return 2 * r - 1, (f" (the initial data's {2 * r - 1} elements count among the steps)"

@@ -14,7 +14,7 @@ extension modules from a zip archive. The workers need symvi installed (the task
 here) and the same Python, NumPy and C ABI as the machine that compiled the package.
 
 Every argument is checked here, on the client, before any task is submitted, by the
-local calls' own checks (``_runtime/batch_arguments.py``): a bad batch is refused in the
+local calls' own checks (``_runtime/step/batch_arguments.py``): a bad batch is refused in the
 same words as on threads, and no cluster time is spent on it.
 
     from dask.distributed import Client
@@ -32,11 +32,13 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from ._runtime import arguments, batch_arguments
-from ._runtime.batch import integrate_many as _local_integrate_many
-from ._runtime.bvp_batch import solve_bvp_many as _local_solve_bvp_many
-from ._runtime.progress import Progress
-from ._runtime.results import BatchResult, BVPBatch, State, Status
+from ._runtime.bvp import solve_arguments
+from ._runtime.core import arguments
+from ._runtime.step import batch_arguments
+from ._runtime.step.batch import integrate_many as _local_integrate_many
+from ._runtime.bvp.bvp_batch import solve_bvp_many as _local_solve_bvp_many
+from ._runtime.core.progress import Progress
+from ._runtime.core.results import BatchResult, BVPBatch, State, Status
 
 
 def integrate_many(client, package: ModuleType, initial, n_steps: int, h,
@@ -72,7 +74,7 @@ def solve_bvp_many(client, package: ModuleType, starts, ends, n_steps: int, h=No
     memory estimate counts the results gathered here). Returns the :class:`BVPBatch` the
     local call returns."""
     folder = _folder(package)
-    batch = batch_arguments.solves(**_arguments(
+    batch = solve_arguments.solves(**_arguments(
         _local_solve_bvp_many, package.model, starts, ends, n_steps, h, params, **options))
     options = _plain_options(options, batch.options)
     chunk = _chunk(chunk)
@@ -100,7 +102,7 @@ def _arguments(local: Callable, model, *args, **options) -> dict:
 def _plain_options(options: dict, checked) -> dict:
     """``options`` with the solver's options (given as ``options=`` or as keywords) as one
     mapping of the ``checked`` object's fields: every package carries its own options
-    classes (``_runtime/options.py``), which a worker that has imported no package
+    classes (``_runtime/core/options.py``), which a worker that has imported no package
     cannot unpickle."""
     names = set(checked.names())
     return {k: v for k, v in options.items() if k != "options" and k not in names} | \
@@ -127,7 +129,7 @@ def _trajectory_task(batch: batch_arguments.Trajectories, options: dict,
     return args, options | own, (rows.start, rows[-1])
 
 
-def _solve_task(batch: batch_arguments.Solves, free_end: bool, options: dict,
+def _solve_task(batch: solve_arguments.Solves, free_end: bool, options: dict,
                 rows: range) -> tuple[tuple, dict, tuple[int, int]]:
     """(arguments, options, (first, last member)) of the local ``solve_bvp_many`` for the
     solves ``rows``: their boundary data, steps, parameters, horizons and guesses."""
@@ -190,7 +192,7 @@ def _batch(values: dict) -> BatchResult:
 
 
 #: A State travels as (_STATE, its fields): plain fields, whatever the worker has
-#: imported (a pickled result would load symvi's classes, ``_runtime/results.py``).
+#: imported (a pickled result would load symvi's classes, ``_runtime/core/results.py``).
 _STATE = "symvi.State"
 
 

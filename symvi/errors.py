@@ -1,6 +1,6 @@
 """Exceptions raised by the compiler stages (model, derivation, build).
 
-Run-time errors of generated modules live in :mod:`symvi._runtime.errors`, which the
+Run-time errors of generated modules live in :mod:`symvi._runtime.core.errors`, which the
 generated packages carry with them (they must not import symvi itself).
 """
 

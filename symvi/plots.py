@@ -16,7 +16,7 @@ from typing import TYPE_CHECKING, Any, Sequence
 import numpy as np
 
 if TYPE_CHECKING:
-    from ._runtime.model_info import ModelInfo
+    from ._runtime.core.model_info import ModelInfo
 
 #: Why ``--plot`` cannot run: the one message of the CLI's early check and of a late import.
 MISSING = "--plot needs matplotlib: pip install 'symvi[plots]'"

@@ -16,7 +16,7 @@ from typing import Any, Sequence
 
 import numpy as np
 
-from ._runtime.results import BatchResult, BVPBatch, State, Status, write_npz
+from ._runtime.core.results import BatchResult, BVPBatch, State, Status, write_npz
 
 
 @dataclass(frozen=True)

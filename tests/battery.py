@@ -34,8 +34,8 @@ def guesses(module, name: str, N: int, count: int = 20, amplitude: float = 0.5) 
     model, ex = module.model, get(name).example
     h = ex.h * ex.n_steps / N
     p = model.params()
-    base = runtime(module, "paths").initial_path(model, ex.start, ex.end, N, None, p, h)
-    problem = runtime(module, "assembly").Problem(model, p, h)
+    base = runtime(module, "core.paths").initial_path(model, ex.start, ex.end, N, None, p, h)
+    problem = runtime(module, "bvp.assembly").Problem(model, p, h)
     blocks = problem._blocks(base)
     out = {"chord": "chord", "zero": zero_guess(module, name, N)}
     t = blocks / N
@@ -83,12 +83,12 @@ def assembled(module, name: str, N: int, result, lifted: bool | None = None):
     lifted system too when ``lifted``)."""
     model, ex = module.model, get(name).example
     h = ex.h * ex.n_steps / N
-    paths, nodes = runtime(module, "paths"), N + 1
+    paths, nodes = runtime(module, "core.paths"), N + 1
     g = paths.flat_configurations(model, result.g, nodes, "g") if model.matrix_dims \
         else np.zeros((nodes, 0))
     x = np.zeros((nodes, 0)) if result.x is None else result.x
     lam = np.zeros((0, 0)) if result.multipliers is None else result.multipliers
     path = paths.Path(*(np.ascontiguousarray(a, dtype=float) for a in (x, g, result.f, lam)))
-    problem = runtime(module, "assembly").Problem(model, model.params(), h, lifted=lifted)
+    problem = runtime(module, "bvp.assembly").Problem(model, model.params(), h, lifted=lifted)
     _, ab, bw, _ = problem.assemble(path, True)
     return problem, path, ab, bw

@@ -88,7 +88,7 @@ def test_the_names_are_read_as_files():
     """The reading above finds the table's rows and what they name (a guard against a
     change of format that would make both tests pass vacuously)."""
     named, _ = _named()
-    assert {"symvi/_runtime/results.py", "symvi/build/cache.py", "symvi/cli.py",
+    assert {"symvi/_runtime/core/results.py", "symvi/build/cache.py", "symvi/cli.py",
             "templates/kernel.c.j2", "symvi/declaration/rank.py"} <= named
     assert len(_table_rows()) >= 9
 
@@ -175,7 +175,7 @@ def test_the_pipeline_runs_one_way():
     """Each package imports only those before it in the pipeline: the declaration neither
     the discretisation nor the derivation (issue 49's reach-backs), the run time no symvi
     package. Another package may read the run time only in its leaves, modules that import
-    no other module of the run time (the shared constants of ``_runtime/signs.py``, which
+    no other module of the run time (the shared constants of ``_runtime/core/signs.py``, which
     imports nothing at all, read by the declaration): never its machinery."""
     edges = package_edges()
     backwards = {edge: found for edge, found in edges.items()
@@ -185,11 +185,11 @@ def test_the_pipeline_runs_one_way():
     modules = _modules()
     read = {link.rpartition(" -> ")[2] for (_, b), found in edges.items() if b == "_runtime"
             for link in found}
-    assert "symvi._runtime.signs" in read
+    assert "symvi._runtime.core.signs" in read
     machinery = sorted(m for m in read
                        if _imports(m, modules[m], modules) - {m} or modules[m].name == "__init__.py")
     assert not machinery, f"other packages read the run time's machinery: {machinery}"
-    signs = ast.parse((SYMVI / "_runtime" / "signs.py").read_text(encoding="utf-8"))
+    signs = ast.parse((SYMVI / "_runtime" / "core" / "signs.py").read_text(encoding="utf-8"))
     assert not [n for n in ast.walk(signs) if isinstance(n, (ast.Import, ast.ImportFrom))]
 
 
@@ -321,12 +321,12 @@ def _source_lines(paths):
 def test_model_info_is_read_by_attribute():
     """No ``info[…]``/``info.get(…)``/``INFO[…]`` string lookup is left in symvi/ (the run
     time included) or the templates: what a package knows about its model is
-    ``_runtime/model_info.py``'s frozen ``ModelInfo``, read by attribute; and the run
+    ``_runtime/core/model_info.py``'s frozen ``ModelInfo``, read by attribute; and the run
     time names the kernels it calls by ``Kernel``, not by strings."""
     sources = [*sorted(SYMVI.rglob("*.py")), *sorted((ROOT / "templates").glob("*.j2"))]
     lookups = [where for where, line in _source_lines(sources) if INFO_LOOKUP.search(line)]
     assert not lookups, "string lookups in INFO:\n" + "\n".join(lookups)
-    runtime = sorted((SYMVI / "_runtime").glob("*.py"))
+    runtime = sorted((SYMVI / "_runtime").rglob("*.py"))
     named = [where for where, line in _source_lines(runtime) if KERNEL_BY_STRING.search(line)]
     assert not named, "kernels named by strings in the run time:\n" + "\n".join(named)
     for line in ('spec = self.info["kernels"].get(kernel)', "info['kind']", 'INFO["key"]',
@@ -347,7 +347,7 @@ def test_model_info_is_a_leaf_of_the_run_time():
     """The build writes ``INFO`` through ``ModelInfo`` and the package reads it back: the
     module imports the standard library only (symvi reads it, a package cannot import
     symvi), and its schema version is an integer the literal carries."""
-    path = SYMVI / "_runtime" / "model_info.py"
+    path = SYMVI / "_runtime" / "core" / "model_info.py"
     tree = ast.parse(path.read_text(encoding="utf-8"))
     imported = {alias.name.split(".")[0] for node in ast.walk(tree)
                 if isinstance(node, ast.Import) for alias in node.names}
@@ -355,3 +355,62 @@ def test_model_info_is_a_leaf_of_the_run_time():
                  if isinstance(node, ast.ImportFrom) and not node.level}
     assert not [n for n in ast.walk(tree) if isinstance(n, ast.ImportFrom) and n.level]
     assert imported <= {"__future__", "dataclasses", "enum", "typing"}, imported
+
+
+# -- the run time's parts run one way -----------------------------------------------------
+#: The run time's parts (ARCHITECTURE.md), each importing only those before it.
+RUNTIME_PARTS = ("core", "step", "bvp", "bounded")
+#: The imports against that order, each inside the function that needs it: the fixed-horizon
+#: solve reaches the bounded solve only for a model with inequalities.
+RUNTIME_LAZY = {"symvi._runtime.bvp.bvp -> symvi._runtime.bounded.barrier",
+                "symvi._runtime.bvp.bvp -> symvi._runtime.bounded.bounded"}
+
+
+def _module_level(path: Path) -> list[ast.AST]:
+    """The statements run when ``path`` loads (not those inside a function)."""
+    found, stack = [], list(ast.parse(path.read_text(encoding="utf-8")).body)
+    while stack:
+        node = stack.pop()
+        found.append(node)
+        if not isinstance(node, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda)):
+            stack.extend(ast.iter_child_nodes(node))
+    return found
+
+
+def test_the_runtime_parts_run_one_way():
+    """``core/`` ← ``step/`` ← ``bvp/`` ← ``bounded/``: a part imports no part after it,
+    but for :data:`RUNTIME_LAZY`, made inside a function; the top (``__init__.py``,
+    ``compiled.py``) loads ``core/`` and ``step/`` only — ``bvp/`` is imported by name on
+    a model's first whole-trajectory call — and no module of ``core/`` or ``step/`` loads
+    SciPy. So a package whose model is only stepped runs on numpy and cffi alone."""
+    modules = {name: path for name, path in _modules().items()
+               if name.startswith("symvi._runtime")}
+
+    def part(name: str) -> str | None:
+        parts = name.split(".")
+        return parts[2] if len(parts) > 2 and parts[2] in RUNTIME_PARTS else None
+
+    backwards, lazy_found = [], set()
+    for name, path in modules.items():
+        for target in _imports(name, path, modules):
+            a, b = part(name), part(target)
+            if a is None or b is None or RUNTIME_PARTS.index(b) <= RUNTIME_PARTS.index(a):
+                continue
+            link = f"{name} -> {target}"
+            if link in RUNTIME_LAZY:
+                lazy_found.add(link)
+            else:
+                backwards.append(link)
+    assert not backwards, f"run-time imports against core ← step ← bvp ← bounded: {backwards}"
+    assert lazy_found == RUNTIME_LAZY
+    for name, path in modules.items():
+        loaded = {(node.module or "") if isinstance(node, ast.ImportFrom) else alias.name
+                  for node in _module_level(path)
+                  if isinstance(node, (ast.Import, ast.ImportFrom)) for alias in node.names}
+        if part(name) in (None, "core", "step"):
+            assert not any(m.split(".")[0] == "scipy" for m in loaded), name
+        if part(name) is None:           # the top: core/ and step/ at load, never bvp/
+            assert not {m for m in loaded
+                        if m.lstrip(".").split(".")[0] in ("bvp", "bounded")}, name
+        elif part(name) == "bvp":
+            assert not {m for m in loaded if m.lstrip(".").split(".")[0] == "bounded"}, name

@@ -1,6 +1,6 @@
 """The batch calls check every argument before any work (issue 48,
-``symvi/_runtime/batch_arguments.py``), and the memory their results will hold against
-what this process may really use (``symvi/_runtime/memory.py``): the machine's free
+``symvi/_runtime/step/batch_arguments.py``), and the memory their results will hold against
+what this process may really use (``symvi/_runtime/core/memory.py``): the machine's free
 memory, its cgroup's limit and its own address-space limit.
 
 The Dask calls run the same checks on the client (``tests/test_dask.py``).
@@ -18,7 +18,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from symvi._runtime import memory
+from symvi._runtime.core import memory
 from symvi.models import get
 
 GIB = 2**30
@@ -36,7 +36,7 @@ def no_solve(slew, monkeypatch):
     """The package's batch module with its solve replaced by one that fails the test:
     what is refused must be refused before the first solve."""
     module = slew[0]
-    bvp_batch = importlib.import_module(f"{module.__name__}._runtime.bvp_batch")
+    bvp_batch = importlib.import_module(f"{module.__name__}._runtime.bvp.bvp_batch")
 
     def solve_bvp(*args, **kwargs):
         raise AssertionError("a solve started")

@@ -8,7 +8,7 @@ reconstruction g_{k+1} = g_k cay(hξ̂_k), the controls of the Lie midpoint rule
 the disc seen from the body at the window's middle node, c = g⁻¹·centre — and minimised
 by SLSQP from a perturbed start. Without the bounds the body brakes with its main
 thruster, and the interior point started at that optimum stalls: the solve succeeds
-from that optimum moved toward the bounds by a quadratic penalty (``_runtime/penalty.py``).
+from that optimum moved toward the bounds by a quadratic penalty (``_runtime/bounded/penalty.py``).
 """
 from __future__ import annotations
 
@@ -145,7 +145,7 @@ def test_converges_from_every_guess_by_way_of_the_penalty(flyer, N):
     that retry every one of these solves STALLED). Three of them (the zero guess, two
     perturbations) stall at about 3e-9 against 3.0e-9 asked — corrections within the
     tolerance, but not with their rounding floor (the rule that a lucky 2.4e-9 over a
-    floor of 3.0e-9 once passed) — and the active-set Newton (``_runtime/polish.py``)
+    floor of 3.0e-9 once passed) — and the active-set Newton (``_runtime/bounded/polish.py``)
     finishes them; before it they ended ILL_CONDITIONED. maxiter = 200: the penalty
     stages take up to about 100 Newton iterations each."""
     import battery

@@ -1,5 +1,5 @@
 """Many whole-trajectory solves: ``solve_bvp_many`` and ``continuation``
-(``symvi/_runtime/bvp_batch.py``, issue 24, item 2).
+(``symvi/_runtime/bvp/bvp_batch.py``, issue 24, item 2).
 
 Each solve of a batch must be the single ``solve_bvp`` call; a solve that fails (an
 infeasible torque limit) keeps its status while the others succeed; a continuation must

@@ -10,7 +10,7 @@ merit is S itself, and a step that climbs it is shifted until it descends.
 """
 from __future__ import annotations
 
-import sys
+import importlib
 
 import numpy as np
 import pytest
@@ -23,7 +23,7 @@ NAME, N = "heavy_top_rotors_oc", 24
 
 def runtime_of(mod, stage: str):
     """The generated package's own copy of a run-time module."""
-    return sys.modules[f"{mod.__name__}._runtime.{stage}"]
+    return importlib.import_module(f"{mod.__name__}._runtime.{stage}")
 
 
 def dense_jacobian(ab: np.ndarray, bw: int) -> np.ndarray:
@@ -38,9 +38,9 @@ def chord_problem(mod, n_steps: int, horizon: float):
     data over ``horizon`` in ``n_steps`` steps."""
     ex = get(mod.model.name).example
     h, p = horizon / n_steps, mod.model.params(None)
-    path = runtime_of(mod, "paths").initial_path(mod.model, ex.start, ex.end, n_steps,
+    path = runtime_of(mod, "core.paths").initial_path(mod.model, ex.start, ex.end, n_steps,
                                                  "chord", p, h)
-    problem = runtime_of(mod, "assembly").Problem(mod.model, p, h)
+    problem = runtime_of(mod, "bvp.assembly").Problem(mod.model, p, h)
     res, ab, bw, finite = problem.assemble(path, True)
     assert finite
     return problem, path, res, ab, bw
@@ -110,7 +110,8 @@ def test_ascent_direction_is_shifted_not_abandoned(compiled):
     problem, path, res, ab, bw = chord_problem(mod, 300, 3.0)
     delta = problem.solve(ab, bw, -res)
     assert res @ delta > 0.0                        # the Newton step ascends
-    moved, taken = runtime_of(mod, "globalisation").descent_step(problem, path, res, ab, bw, delta)
+    globalisation = runtime_of(mod, "bvp.globalisation")
+    moved, taken = globalisation.descent_step(problem, path, res, ab, bw, delta)
     assert taken is not None and problem.shift > 0.0
     assert problem.merit(moved)[0] < problem.merit(path)[0]
 
@@ -122,8 +123,8 @@ def test_double_pendulum_over_a_longer_horizon_converges_to_a_minimum(compiled):
     mod, ex = compiled("double_pendulum_oc"), get("double_pendulum_oc").example
     result = mod.solve_bvp(ex.start, ex.end, 300, 0.01)
     assert result.success, result.message
-    problem = runtime_of(mod, "assembly").Problem(mod.model, mod.model.params(None), 0.01)
-    path = runtime_of(mod, "paths").initial_path(mod.model, ex.start, ex.end, 300,
+    problem = runtime_of(mod, "bvp.assembly").Problem(mod.model, mod.model.params(None), 0.01)
+    path = runtime_of(mod, "core.paths").initial_path(mod.model, ex.start, ex.end, 300,
                                                  result.x[2:-2], problem.p, 0.01)
     dense = dense_jacobian(*problem.assemble(path, True)[1:3])
     hessian = (dense + dense.T) / 2
@@ -138,6 +139,6 @@ def test_curvature_is_the_quadratic_form_of_the_node_block(compiled, newton_step
     _, ab, bw, _ = problem.assemble(path, True)
     nodes = ~problem.constraint_rows(path)
     W, d = dense_jacobian(ab, bw)[np.ix_(nodes, nodes)], delta[nodes]
-    globalisation = runtime_of(compiled(NAME), "globalisation")
+    globalisation = runtime_of(compiled(NAME), "bvp.globalisation")
     assert globalisation.curvature(problem.model, ab, bw, delta, nodes, 0.5) == \
         pytest.approx(d @ W @ d + 0.5 * d @ d, rel=1e-12)

@@ -111,7 +111,7 @@ def test_cubic_spline_between_states_with_velocities(compiled):
     states and velocities converge at order 2; the given states are the solution's
     first and last states; the node form with the nodes the States fix is the same
     solve, bit for bit."""
-    from symvi._runtime import boundary_states
+    from symvi._runtime.bvp import boundary_states
     mod, T = compiled("cubic_spline"), 1.5
     q0, v0, q1, v1 = (np.array(a) for a in ([0.0, 1.0], [1.0, -1.0], [1.0, 0.0], [0.5, 2.0]))
     costs, paths = [], []
@@ -240,7 +240,7 @@ def test_failed_and_mismatched_results_from_states(compiled):
     steps names the user's numbers; a non-finite path attaches no states, without error."""
     import numpy as np
     from dataclasses import replace as replaced
-    from symvi._runtime import boundary_states
+    from symvi._runtime.bvp import boundary_states
     mod = compiled("rigid_body_oc")
     rest = np.zeros(3)
     failed = mod.solve_bvp(State(g=np.eye(3), v=rest), State(g=quarter_turn(), v=rest), 20,

@@ -12,10 +12,10 @@ import re
 import numpy as np
 import pytest
 
-from symvi._runtime.batch import integrate_many
-from symvi._runtime.bvp import solve_bvp
-from symvi._runtime.bvp_batch import continuation, solve_bvp_many
-from symvi._runtime.stepping import integrate
+from symvi._runtime.step.batch import integrate_many
+from symvi._runtime.bvp.bvp import solve_bvp
+from symvi._runtime.bvp.bvp_batch import continuation, solve_bvp_many
+from symvi._runtime.step.stepping import integrate
 from symvi.cli import main, parser
 from symvi.models import get
 

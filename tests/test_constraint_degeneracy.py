@@ -25,7 +25,7 @@ NAME = "heavy_top_rotors_oc"
 def path_through(mod, x, g, h):
     """The run-time Path with the nodes (x, g), its ends fixed as a solve would take them."""
     p = mod.model.params(None)
-    return runtime_of(mod, "paths").initial_path(
+    return runtime_of(mod, "core.paths").initial_path(
         mod.model, (x[:2], g[:2]), (x[-2:], g[-2:]), len(g) - 1, (x[2:-2], g[2:-2]), p, h)
 
 
@@ -37,7 +37,7 @@ def feasible_system(mod, n_steps: int):
     h = ex.n_steps * ex.h / n_steps
     x, g = top_path(name, dict(zip(mod.model.parameter_names, p)), n_steps, h)
     path = path_through(mod, x, g, h)
-    problem = runtime_of(mod, "assembly").Problem(mod.model, p, h)
+    problem = runtime_of(mod, "bvp.assembly").Problem(mod.model, p, h)
     res, ab, bw, finite = problem.assemble(path, True)
     assert finite and np.abs(res[problem.constraint_rows(path)]).max() < 1e-10   # feasible
     return problem, path, res, ab, bw

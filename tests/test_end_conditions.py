@@ -187,8 +187,8 @@ def test_the_newton_matrix_of_the_unknown_end_is_the_residuals_derivative(models
     module = models[which]
     model, N = module.model, 8
     p, h = model.params(), 1.0 / N
-    problem = runtime_of(module, "assembly").Problem(model, p, h)
-    path = runtime_of(module, "paths").initial_path(model, start, None, N, None, p, h)
+    problem = runtime_of(module, "bvp.assembly").Problem(model, p, h)
+    path = runtime_of(module, "core.paths").initial_path(model, start, None, N, None, p, h)
     size = int(model.lib.symvi_bvp_unknowns(N + 1))
     rng = np.random.default_rng(3)
     path = problem.moved(path, 0.1 * rng.standard_normal(size), 1.0)   # off the optimum

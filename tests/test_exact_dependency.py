@@ -6,7 +6,7 @@ Noether identity holds exactly: Σ_k Γ_k·Φ_d^k equals the difference of the e
 vertical momenta on every path between them (the paper's rule keeps it to O(h⁴) only,
 tests/test_constraint_degeneracy.py). So J_Φ has an exact left null vector, Γ at each
 window's middle node, and the next singular value falls at the generic order 2; the Newton
-matrix is singular, and with the gauge of ``_runtime/gauge.py`` (window w's rows replaced
+matrix is singular, and with the gauge of ``_runtime/bvp/gauge.py`` (window w's rows replaced
 by (I − ΓΓᵀ)Φ_d^w + ΓΓᵀλ^w) it is regular with the generic fourth-difference conditioning
 ∝ N⁻⁴. Non-planar problems then converge from the chord guess at every N tried, where
 the paper's rule fails from N = 96.
@@ -138,7 +138,7 @@ def tangent_curvatures(mod, result, h: float) -> np.ndarray:
     whose rows are the identity."""
     path = path_through(mod, result.x, result.g, h)
     path.lam[:] = result.multipliers
-    problem = runtime_of(mod, "assembly").Problem(mod.model, mod.model.params(None), h)
+    problem = runtime_of(mod, "bvp.assembly").Problem(mod.model, mod.model.params(None), h)
     J = dense_jacobian(*problem.assemble(path, True)[1:3])
     rows, n = problem.constraint_rows(path), mod.model.n
     free = ~rows

@@ -83,7 +83,7 @@ def test_converges_from_perturbed_guesses_and_is_honest_at_n_1000(modules):
     succeed at the default tolerance, at one horizon to 1e-7 between N = 400's and the
     limit. There the torques saturate on two thirds of the windows and rounding once
     stalled the KKT corrections near 5e-8 (ILL_CONDITIONED at the default tolerance); the
-    active-set Newton (``_runtime/polish.py``) finishes them."""
+    active-set Newton (``_runtime/bounded/polish.py``) finishes them."""
     import battery
     from so3 import cay, hat
 

@@ -15,7 +15,7 @@ from scipy.linalg import expm
 from scipy.spatial.transform import Rotation
 
 from symvi import SE2, SE3, SO3, ActionGroupoid, ModelError
-from symvi._runtime.geometry import TOLERANCE, group_defect
+from symvi._runtime.core.geometry import TOLERANCE, group_defect
 from symvi.models import get
 
 I3 = np.eye(3)

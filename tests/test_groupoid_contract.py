@@ -183,7 +183,7 @@ def test_the_template_context_is_typed_data():
 
 def test_initial_layouts_read_as_the_compiled_model_does(velocity_modules, tmp_path):
     """The layouts of initial data the package names (``INFO.initial_layout``,
-    ``_runtime/paths.py``) read what :meth:`CompiledModel.initial_state` reads: the
+    ``_runtime/core/paths.py``) read what :meth:`CompiledModel.initial_state` reads: the
     first K nodes on the pair groupoid, (x₀, f) here."""
     import importlib
     P = PairGroupoid("a b")
@@ -191,7 +191,7 @@ def test_initial_layouts_read_as_the_compiled_model_does(velocity_modules, tmp_p
                                lagrangian=_lagrangian(P.q, P.qdot)), tmp_path)
     for mod, initial, name in ((pair, [X0, [0.5, 0.1]], "nodes"),
                                (velocity_modules["lie"], (X0, [V0]), "elements")):
-        paths = importlib.import_module(f"{mod.__name__}._runtime.paths")
+        paths = importlib.import_module(f"{mod.__name__}._runtime.core.paths")
         assert mod.INFO.initial_layout == name
         read = paths.initial_layout(mod.model).read(mod.model, initial)
         for ours, theirs in zip(read, mod.model.initial_state(initial)):

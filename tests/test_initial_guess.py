@@ -1,5 +1,5 @@
 """The default initial guess of the whole-trajectory solve: the cubic that interpolates
-the boundary positions and velocities (``_runtime/paths.py``).
+the boundary positions and velocities (``_runtime/core/paths.py``).
 
 With r = 2 the fixed nodes carry velocities; the chord between g_1 and g_{N−1} ignores
 them, so the guess starts with a velocity jump of O(1), whose O(1/h) accelerations put
@@ -19,7 +19,7 @@ from test_bvp_merit import runtime_of
 def guess(mod, start, end, N, kind=None, h=0.05):
     """Nodes (x, g) of the initial path of ``kind`` (None: the default)."""
     p = mod.model.params(None)
-    path = runtime_of(mod, "paths").initial_path(mod.model, start, end, N, kind, p, h)
+    path = runtime_of(mod, "core.paths").initial_path(mod.model, start, end, N, kind, p, h)
     return path.x, path.g.reshape(N + 1, *(3, 3) if mod.model.matrix_dims else (0,))
 
 

@@ -1,4 +1,4 @@
-"""Batches of trajectories: ``integrate_many`` (``symvi/_runtime/batch.py``, issue 24).
+"""Batches of trajectories: ``integrate_many`` (``symvi/_runtime/step/batch.py``, issue 24).
 
 Each trajectory must be the single ``integrate`` call bit for bit, on one thread or two;
 a trajectory whose Newton step fails must keep its own status, message and partial path
@@ -105,7 +105,7 @@ def test_results_pickle_and_save(compiled, tmp_path):
     r = mod.integrate_many(states(mod, 3), 20, 0.01)
     again = pickle.loads(pickle.dumps(r))
     # a pickle loads as symvi's class, which counts as the package's (issue 49)
-    assert type(again).__module__ == "symvi._runtime.results" and isinstance(again, type(r))
+    assert type(again).__module__ == "symvi._runtime.core.results" and isinstance(again, type(r))
     assert np.array_equal(again.x, r.x)
     assert list(again.statuses) == list(r.statuses) and again.messages == r.messages
     r.save(tmp_path / "batch.npz")

@@ -186,7 +186,7 @@ def test_keep_every_stores_every_kth_node_of_the_same_run(compiled, monkeypatch,
     mod, example, k = compiled(name), get(name).example, 7
     n = 5000
     full = mod.integrate(example.initial, n, example.h)
-    stepping = runtime_module(mod, "stepping")
+    stepping = runtime_module(mod, "step.stepping")
     monkeypatch.setattr(stepping, "BUFFER_STEPS", 1000)
     monkeypatch.setattr(stepping, "CHUNK_SECONDS", 1e-7)      # many chunks of 1024 steps
     chunked = mod.integrate(example.initial, n, example.h)
@@ -254,7 +254,7 @@ def test_parameter_defaults_that_are_not_numbers_are_refused_in_the_run_times_wo
     """A string or boolean default was silently converted (``"1.0"`` → 1.0, True → 1.0)
     where ``integrate(..., params={"k": "1.0"})`` refuses it: the declaration now refuses
     it with the run time's own message."""
-    from symvi._runtime.arguments import real
+    from symvi._runtime.core.arguments import real
     G, theta, omega = pendulum_symbols()
     k = sp.Symbol("k", real=True)
     with pytest.raises(ValueError) as runtime:

@@ -35,10 +35,10 @@ def systems(mod, name: str, N: int, guess="chord"):
     """The node and the lifted Problem, both assembled at the same initial path."""
     start, end, h = boundary(name, N)
     p = mod.model.params(None)
-    path = runtime_of(mod, "paths").initial_path(mod.model, start, end, N, guess, p, h)
+    path = runtime_of(mod, "core.paths").initial_path(mod.model, start, end, N, guess, p, h)
     out = []
     for lifted in (False, True):
-        problem = runtime_of(mod, "assembly").Problem(mod.model, p, h, lifted=lifted)
+        problem = runtime_of(mod, "bvp.assembly").Problem(mod.model, p, h, lifted=lifted)
         res, ab, bw, finite = problem.assemble(path, True)
         assert finite and (problem.lifted_system is not None) is lifted
         out.append((problem, res, ab, bw))
@@ -151,7 +151,7 @@ def test_band_factor_solve_and_residual_are_lapacks(compiled):
     from scipy.linalg.lapack import dgbtrf
 
     mod = compiled("cubic_spline")
-    band = runtime_of(mod, "band")
+    band = runtime_of(mod, "bvp.band")
     rng = np.random.default_rng(3)
     size, bw = 200, 7
     A, ab = random_band(rng, size, bw, diagonal=1e-3)
@@ -181,7 +181,7 @@ def test_band_cholesky_decides_definiteness_of_the_symmetric_part(compiled):
     non-symmetric band matrix: positive definite exactly for shifts s above −λ_min of
     sym(A), and never with a non-finite entry."""
     mod = compiled("cubic_spline")
-    band = runtime_of(mod, "band")
+    band = runtime_of(mod, "bvp.band")
     size, bw = 120, 5
     A, ab = random_band(np.random.default_rng(5), size, bw)
     lowest = float(np.linalg.eigvalsh(0.5 * (A + A.T))[0])

@@ -17,7 +17,7 @@ from pathlib import Path
 
 import pytest
 
-from symvi._runtime.model_info import VERSION, Kernel, KernelInfo, ModelInfo, ModelInfoError
+from symvi._runtime.core.model_info import VERSION, Kernel, KernelInfo, ModelInfo, ModelInfoError
 
 
 @pytest.fixture(scope="module")

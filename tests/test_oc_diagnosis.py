@@ -1,5 +1,5 @@
 """Why an underactuated optimal-control solve fails, where its constraints are the cause
-(issue 22, item 5; ``symvi/_runtime/diagnosis.py``).
+(issue 22, item 5; ``symvi/_runtime/bvp/diagnosis.py``).
 
 A planar body on SE(2) with a torque only: the constraints are its unactuated
 translational equations, m(v̇₁ − ωv₂) = m(v̇₂ + ωv₁) = 0 — in the world frame mẍ = 0.
@@ -92,9 +92,9 @@ def test_no_diagnosis_where_the_constraints_are_not_the_cause(compiled, N, itera
     assert result.status.name == "MAX_ITERATIONS"
     assert "constraints of the" not in result.message
     model, p = module.model, module.model.params()
-    path = runtime_of(module, "paths").initial_path(model, ex.start, ex.end, N, result, p, h)
-    problem = runtime_of(module, "assembly").Problem(model, p, h)
-    assert runtime_of(module, "diagnosis").diagnose(problem, path) is None
+    path = runtime_of(module, "core.paths").initial_path(model, ex.start, ex.end, N, result, p, h)
+    problem = runtime_of(module, "bvp.assembly").Problem(model, p, h)
+    assert runtime_of(module, "bvp.diagnosis").diagnose(problem, path) is None
 
 
 def test_a_world_frame_symmetry_declared_as_a_constant_is_refused_with_the_form_expected(

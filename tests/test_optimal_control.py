@@ -22,7 +22,7 @@ SciPy's rotation vector as exp⁻¹, and the controlled equations EL(L) written 
 from __future__ import annotations
 
 import math
-import sys
+import importlib
 
 import numpy as np
 import pytest
@@ -401,8 +401,8 @@ def test_newton_matrix_conditioning_and_its_limit(compiled):
     a failed solve there names that cause; an ordinary failure (out of iterations at
     N = 200) does not. By default such N are solved with the lifted system (κ ∝ N²,
     tests/test_lifted.py), which converges at N = 10⁵ (tests/test_false_success.py)."""
-    from symvi._runtime.assembly import Problem as _Problem
-    from symvi._runtime.paths import initial_path
+    from symvi._runtime.bvp.assembly import Problem as _Problem
+    from symvi._runtime.core.paths import initial_path
 
     mod, ex = compiled("rigid_body_oc"), get("rigid_body_oc").example
     p, rcond = mod.model.params(), {}
@@ -416,7 +416,7 @@ def test_newton_matrix_conditioning_and_its_limit(compiled):
     np.testing.assert_allclose(orders, 4.0, atol=0.3)
     ordinary = mod.solve_bvp(ex.start, ex.end, 200, 1.0 / 200, maxiter=1)
     assert not ordinary.success and "working precision" not in ordinary.message
-    N, assembly = 60_000, sys.modules[f"{mod.__name__}._runtime.assembly"]
+    N, assembly = 60_000, importlib.import_module(f"{mod.__name__}._runtime.bvp.assembly")
     with pytest.MonkeyPatch.context() as patch:
         patch.setattr(assembly, "LIFT_FROM", 10**9)         # the node formulation
         exhausted = mod.solve_bvp(ex.start, ex.end, N, 1.0 / N, maxiter=2)

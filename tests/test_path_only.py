@@ -33,8 +33,8 @@ def test_the_memory_check_counts_what_is_stored(compiled, monkeypatch):
     refused before anything is allocated and the path alone runs."""
     import importlib
     mod = compiled("pendulum")
-    memory = importlib.import_module(f"{mod.__name__}._runtime.memory")
-    storage = importlib.import_module(f"{mod.__name__}._runtime.storage")
+    memory = importlib.import_module(f"{mod.__name__}._runtime.core.memory")
+    storage = importlib.import_module(f"{mod.__name__}._runtime.core.storage")
     n_steps = 3_000_000
     path_bytes = storage.bytes_per_node(mod.model, quantities=False) * (n_steps + 1)
     assert path_bytes > memory.SMALL
@@ -57,7 +57,7 @@ def test_batches_of_paths_alone(compiled, monkeypatch):
     starts = State(x=rng.uniform(-1, 1, (5, 2)), v=rng.uniform(-1, 1, (5, 2)))
     full = mod.integrate_many(starts, 400, 0.005, workers=2)
     alone = mod.integrate_many(starts, 400, 0.005, workers=2, quantities=False)
-    batch_loop = importlib.import_module(f"{mod.__name__}._runtime.batch_loop")
+    batch_loop = importlib.import_module(f"{mod.__name__}._runtime.step.batch_loop")
     monkeypatch.setattr(batch_loop, "MAX_PATH_BYTES", 1)      # one trajectory at a time
     one_by_one = mod.integrate_many(starts, 400, 0.005, workers=2, quantities=False,
                                     keep_every=7)

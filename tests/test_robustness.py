@@ -3,7 +3,7 @@ item 3).
 
 The battery (:mod:`battery`): chord, zero and 20 smooth random perturbations of the
 default guess, per bundled optimal-control problem. Every SUCCESS must be a minimum: the
-solver's second-order test (W + ρAᵀA positive definite, :mod:`symvi._runtime.optimality`)
+solver's second-order test (W + ρAᵀA positive definite, :mod:`symvi._runtime.bvp.optimality`)
 is checked here against the eigenvalues of the reduced Hessian ZᵀWZ, Z a basis of ker A
 computed densely by SciPy.
 """
@@ -14,7 +14,7 @@ import pytest
 from scipy.linalg import null_space
 
 import battery
-from symvi._runtime.optimality import second_order
+from symvi._runtime.bvp.optimality import second_order
 from symvi.models import get
 
 #: Success rate required at N = 100 and 1000 (issue 20 asks 100 % for the first three and
@@ -25,7 +25,8 @@ REQUIRED = {"rigid_body_oc": 1.0, "double_pendulum_oc": 1.0, "cart_pole_oc": 1.0
 
 
 def banded(J: np.ndarray, bw: int) -> np.ndarray:
-    """J in the band storage of ``Problem.assemble`` (:mod:`symvi._runtime.assembly`): ab[2 bw + row − col, col]."""
+    """J in the band storage of ``Problem.assemble`` (:mod:`symvi._runtime.bvp.assembly`):
+    ab[2 bw + row − col, col]."""
     n = J.shape[0]
     ab = np.zeros((3 * bw + 1, n))
     for row in range(n):
@@ -88,7 +89,7 @@ def test_a_saddle_is_never_a_success(compiled, monkeypatch):
     mod, ex = compiled(name), get(name).example
     guess = battery.guesses(mod, name, N)["perturbed 12"]
     with monkeypatch.context() as patch:
-        patch.setattr(battery.runtime(mod, "globalisation"), "convexifying_shift",
+        patch.setattr(battery.runtime(mod, "bvp.globalisation"), "convexifying_shift",
                       lambda definite, start: start)
         saddle = mod.solve_bvp(ex.start, ex.end, N, ex.h * ex.n_steps / N, guess=guess,
                                maxiter=2000)

@@ -42,7 +42,7 @@ def test_a_minimum_moved_below_zero_is_not_accepted(minimum, reduced):
     moved[2 * bw, keep] -= sigma
     check = np.linalg.eigvalsh(Z.T @ (W - sigma * np.eye(len(W))) @ Z)[0]
     assert abs(check - target) <= 1e-6 * lowest
-    verdict = battery.runtime(module, "optimality").second_order(moved, bw, rows)
+    verdict = battery.runtime(module, "bvp.optimality").second_order(moved, bw, rows)
     assert verdict.minimum == (target > 0), (target, verdict)
 
 

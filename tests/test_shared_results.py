@@ -1,9 +1,9 @@
 """Results pickle by name, from symvi, without import side effects (issue 19 item 5,
 issue 49 item 6).
 
-Each generated package carries a copy of ``_runtime/results.py`` in a private module no
+Each generated package carries a copy of ``_runtime/core/results.py`` in a private module no
 other process can import. Every class of that file pickles, through ``__reduce__``, as a
-call of ``symvi._runtime.results``' own, which loading imports by name: so a result
+call of ``symvi._runtime.core.results``' own, which loading imports by name: so a result
 loads in a fresh interpreter that runs ``import pickle`` alone (symvi installed), as
 symvi's class, whatever package made it and without it. Importing a package or the file
 registers nothing in ``sys.modules``; the copies' classes are distinct, and each copy
@@ -27,10 +27,10 @@ import numpy as np
 import pytest
 
 import symvi
-from symvi._runtime import results as home
+from symvi._runtime.core import results as home
 from symvi.models import get
 
-RESULTS_SOURCE = Path(symvi.__file__).resolve().parent / "_runtime" / "results.py"
+RESULTS_SOURCE = Path(symvi.__file__).resolve().parent / "_runtime" / "core" / "results.py"
 
 
 def step_result(compiled, name: str, n_steps: int = 20):
@@ -68,7 +68,7 @@ def states_batch(compiled):
 
 
 def assert_same(original, back) -> None:
-    """``back`` is ``original`` as symvi's own classes (``symvi._runtime.results``) at
+    """``back`` is ``original`` as symvi's own classes (``symvi._runtime.core.results``) at
     every level — results, States, Statuses, nested results — with equal fields, arrays
     bitwise (NaN where NaN), of the same dtype and shape."""
     if isinstance(original, (home._Result, home.State, home.Status, home.NewtonError)):
@@ -155,7 +155,7 @@ def test_results_load_in_a_fresh_process_with_import_pickle_alone(compiled, buil
     proc = fresh_python(LOADER, given, back, cwd=tmp_path)
     assert proc.returncode == 0, proc.stderr
     report = json.loads(proc.stdout)
-    assert report["classes"] == [f"symvi._runtime.results.{name}" for name in
+    assert report["classes"] == [f"symvi._runtime.core.results.{name}" for name in
                                  ("BVPBatch", "BVPResult", "BatchResult", "NewtonError",
                                   "State", "Status", "StepResult")]
     assert report["packages"] == [] and str(build_dir) not in report["path"]
@@ -194,7 +194,7 @@ def test_importing_packages_registers_no_shared_module(compiled):
             cls = getattr(package, name)
             assert cls.__module__.startswith(package.__name__ + "."), (name, cls.__module__)
             assert cls is not getattr(home, name)
-    assert home.StepResult.__module__ == "symvi._runtime.results"
+    assert home.StepResult.__module__ == "symvi._runtime.core.results"
 
 
 IMPORT_A_COPY = """

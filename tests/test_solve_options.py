@@ -2,7 +2,7 @@
 whole from ``solve_bvp``/``solve_bvp_many``/``continuation`` to every phase, ``StepOptions``
 for the step map, unknown names refused by name, the command line's flags.
 
-A new option is declared once, as a field of ``_runtime/options.py`` (its default, its
+A new option is declared once, as a field of ``_runtime/core/options.py`` (its default, its
 meaning and its check), and read by the phase that uses it: the calls, the batch calls,
 Dask and the command line pass it on without naming it. The tests below show real fields
 flowing from the public call to the phase that reads them, and changing what it does.
@@ -11,13 +11,13 @@ from __future__ import annotations
 
 import dataclasses
 import re
-import sys
+import importlib
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-from symvi._runtime.options import SolveOptions as SymviSolveOptions
+from symvi._runtime.core.options import SolveOptions as SymviSolveOptions
 from symvi.cli import main
 from symvi.models import get
 from symvi.sweep import _replicate
@@ -26,8 +26,9 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def runtime_module(package, name: str):
-    """The generated package's own copy of ``_runtime/<name>.py``."""
-    return sys.modules[f"{package.__name__}._runtime.{name}"]
+    """The generated package's own copy of the run-time module ``name``
+    (``"<part>.<module>"``, e.g. ``"bvp.newton"``)."""
+    return importlib.import_module(f"{package.__name__}._runtime.{name}")
 
 
 @pytest.fixture(scope="module")
@@ -71,10 +72,10 @@ def _same(a, b) -> None:
 # -- one object, from the call to the phase ----------------------------------------------
 def test_a_keyword_option_reaches_the_whole_trajectory_newton(oc, monkeypatch):
     """``solve_bvp(..., xtol=1e-7, verbose=True)``: the fixed-horizon phase calls the Newton
-    iteration (``_runtime/newton.py``) with one ``SolveOptions`` holding both (the package's
+    iteration (``_runtime/bvp/newton.py``) with one ``SolveOptions`` holding both (the package's
     own class), the other fields at their defaults."""
     module = oc[0]
-    bvp = runtime_module(module, "bvp")
+    bvp = runtime_module(module, "bvp.bvp")
     seen = []
     real = bvp.newton
 
@@ -85,7 +86,7 @@ def test_a_keyword_option_reaches_the_whole_trajectory_newton(oc, monkeypatch):
     result = _solve(oc, xtol=1e-7, verbose=True)
     assert result.success and len(seen) == 1
     options = seen[0]
-    assert type(options) is runtime_module(module, "options").SolveOptions
+    assert type(options) is runtime_module(module, "core.options").SolveOptions
     assert (options.xtol, options.verbose, options.maxiter, options.ftol) == (1e-7, True, 100, 0.0)
 
 
@@ -95,7 +96,7 @@ def test_an_interior_point_option_reaches_the_interior_point(slew, monkeypatch):
     keywords through the bounded phase to the interior point, whose first barrier
     parameter it is, and the solve changes with it."""
     module, start, end, N = slew
-    bounded = runtime_module(module, "bounded")
+    bounded = runtime_module(module, "bounded.bounded")
     seen = []
 
     class Spy(bounded.InteriorPoint):
@@ -264,12 +265,13 @@ def test_a_new_option_touches_only_options_and_its_phase():
     is its field in ``options.py`` and the phase that reads it: two files."""
     runtime = ROOT / "symvi" / "_runtime"
     plumbing = [runtime / f"{name}.py" for name in (
-        "bvp", "bvp_batch", "batch_arguments", "batch", "batch_loop", "stepping",
-        "compiled")] + [ROOT / "symvi" / f"{name}.py" for name in (
+        "bvp/bvp", "bvp/bvp_batch", "step/batch_arguments", "bvp/solve_arguments",
+        "step/batch", "step/batch_loop", "step/stepping", "compiled")] + [
+        ROOT / "symvi" / f"{name}.py" for name in (
             "dask", "cli", "cli_arguments", "sweep")]
     names = [f.name for f in dataclasses.fields(SymviSolveOptions)]
     for name in names:
-        readers = [p.name for p in runtime.glob("*.py")
+        readers = [p.name for p in runtime.rglob("*.py")
                    if re.search(rf"options\.{name}\b", p.read_text())]
         assert readers, name
         if name not in ("maxiter", "xtol", "ftol", "verbose"):

@@ -1,5 +1,5 @@
 """A run started from a state (q₀, v₀) (issue 22, item 1): the first element from the
-discrete Legendre transform F⁻L_d(x₀, f₀) = ∂L/∂v (``_runtime/legendre.py``).
+discrete Legendre transform F⁻L_d(x₀, f₀) = ∂L/∂v (``_runtime/step/legendre.py``).
 
 Checked against SciPy's DOP853 (rtol = atol = 1e-13) on the continuous equations, written
 here independently of symvi — Lagrange's equations of the pair-groupoid models derived

@@ -1,22 +1,22 @@
 """The Python face of a compiled model: kernels, the step map and the whole-trajectory solve."""
 from __future__ import annotations
 
+import importlib
 import inspect
+import types
 from typing import Callable, Mapping
 
 import numpy as np
 
-from . import arguments
-from .batch import integrate_many
-from .bvp import solve_bvp
-from .bvp_batch import continuation, solve_bvp_many
-from .geometry import check_configurations
-from .legendre import first_fibres, state_arrays
-from .model_info import Kernel, KernelInfo, ModelInfo, kernel_name
-from .options import SolveOptions, StepOptions
-from .paths import increments, initial_layout
-from .results import State
-from .stepping import integrate
+from .core import arguments
+from .core.geometry import check_configurations
+from .core.model_info import Kernel, KernelInfo, ModelInfo, kernel_name
+from .core.options import SolveOptions, StepOptions
+from .core.paths import increments, initial_layout
+from .core.results import State
+from .step.batch import integrate_many
+from .step.legendre import first_fibres, state_arrays
+from .step.stepping import integrate
 
 
 def _documented_by(function: Callable) -> Callable:
@@ -32,6 +32,36 @@ def _documented_by(function: Callable) -> Callable:
         method.__doc__ = function.__doc__
         return method
     return decorate
+
+
+class _Solve:
+    """A method that forwards to a whole-trajectory function of ``bvp/`` (``module``'s
+    ``name``), imported on the first call or the first look at its signature or docstring
+    (then as :func:`_documented_by` gives them): a package whose model is only stepped never
+    imports ``bvp/``, ``bounded/`` or SciPy."""
+
+    def __init__(self, module: str, name: str):
+        self._module, self.__name__, self.__qualname__ = module, name, f"CompiledModel.{name}"
+
+    @property
+    def function(self) -> Callable:
+        return getattr(importlib.import_module(self._module, __package__), self.__name__)
+
+    @property
+    def __doc__(self) -> str | None:
+        return self.function.__doc__
+
+    @property
+    def __signature__(self) -> inspect.Signature:
+        signature = inspect.signature(self.function)
+        first, *rest = signature.parameters.values()
+        return signature.replace(parameters=[first.replace(name="self"), *rest])
+
+    def __get__(self, model, owner=None):
+        return self if model is None else types.MethodType(self, model)
+
+    def __call__(self, model, *args, **options):
+        return self.function(model, *args, **options)
 
 
 class CompiledModel:
@@ -202,18 +232,9 @@ class CompiledModel:
                              f"solved as a whole trajectory: use solve_bvp")
         return integrate_many(self, initial, n_steps, h, params, **options)
 
-    @_documented_by(solve_bvp)
-    def solve_bvp(self, start, end, n_steps: int, h: float | None = None, params=None,
-                  **options):
-        return solve_bvp(self, start, end, n_steps, h, params, **options)
-
-    @_documented_by(solve_bvp_many)
-    def solve_bvp_many(self, starts, ends, n_steps: int, h=None, params=None, **options):
-        return solve_bvp_many(self, starts, ends, n_steps, h, params, **options)
-
-    @_documented_by(continuation)
-    def continuation(self, start, end, n_steps: int, h=None, path=None, **options):
-        return continuation(self, start, end, n_steps, h, path, **options)
+    solve_bvp = _Solve(".bvp.bvp", "solve_bvp")
+    solve_bvp_many = _Solve(".bvp.bvp_batch", "solve_bvp_many")
+    continuation = _Solve(".bvp.bvp_batch", "continuation")
 
     @property
     def matrix_dims(self) -> tuple[int, ...]:
@@ -233,7 +254,7 @@ class CompiledModel:
 
     def increments(self, g, h: float, params=None) -> np.ndarray:
         """ξ_k = τ⁻¹(g_k⁻¹g_{k+1})/h of configurations g (K, d, d) on a matrix Lie group;
-        see :func:`bvp.increments`."""
+        see :func:`.core.paths.increments`."""
         return increments(self, g, h, params)
 
     def state_parts(self, state: State) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

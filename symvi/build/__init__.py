@@ -80,7 +80,7 @@ def cache_key(model: Model) -> str:
       ``INFO`` carry it);
     * symvi's version (written into ``INFO`` and the C source's header);
     * the templates (:func:`~symvi.codegen.emit.templates_digest`) and the run-time files copied
-      into the package (``symvi/_runtime/*.py``), read from disk as the build would;
+      into the package (``symvi/_runtime/**/*.py``), read from disk as the build would;
     * the sources of every symvi module that generates the files: the closure of the
       symvi-internal imports of the modules the build runs, without the checks, the
       command line, the bundled model files and the build's own orchestration, lock and

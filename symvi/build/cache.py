@@ -7,7 +7,7 @@ code that generates a package (:func:`generating_sources`), the compiler
 
 The manifest ``symvi.json`` of a generated package names the cache key it was built
 for and records the size and SHA-256 of every file of the package (the extension, the
-C source, ``__init__.py``, each ``_runtime/*.py``). A build is reused only when its key
+C source, ``__init__.py``, each ``_runtime/**/*.py``). A build is reused only when its key
 matches and every recorded file is intact; files the manifest does not list (e.g.
 ``__pycache__``) are ignored.
 """

@@ -19,21 +19,24 @@ from ..codegen.emit import CSource, environment
 from ..errors import BuildError
 from .files import write_file, writing
 from ..declaration.symbols import sign
-from .._runtime.model_info import VERSION as MODEL_INFO_VERSION
-from .._runtime.model_info import GroupInfo, Kernel, KernelInfo, ModelInfo
+from .._runtime.core.model_info import VERSION as MODEL_INFO_VERSION
+from .._runtime.core.model_info import GroupInfo, Kernel, KernelInfo, ModelInfo
 
 #: The symvi package folder (its sources are part of the cache key).
 PACKAGE = Path(__file__).resolve().parent.parent
 
 # Importing symvi registers the result classes of its run-time files under their
-# canonical name (see ``_runtime/results.py``), so that a process with symvi unpickles
+# canonical name (see ``_runtime/core/results.py``), so that a process with symvi unpickles
 # the results of the packages built from them without importing one.
-importlib.import_module(f"{__package__.rpartition('.')[0]}._runtime.results")
+importlib.import_module(f"{__package__.rpartition('.')[0]}._runtime.core.results")
 
 
 def runtime_files() -> list[Path]:
-    """The run-time sources copied into every package (``symvi/_runtime/*.py``)."""
-    return sorted((PACKAGE / "_runtime").glob("*.py"))
+    """The run-time sources copied into every package (``symvi/_runtime/**/*.py``: its
+    ``__init__.py`` and ``compiled.py``, and the subpackages ``core/``, ``step/``, ``bvp/``
+    and ``bounded/``)."""
+    return sorted(path for path in (PACKAGE / "_runtime").rglob("*.py")
+                  if "__pycache__" not in path.parts)
 
 
 def python_string(text: str) -> str:
@@ -66,7 +69,7 @@ def fibre_nodes(dm: DerivedModel) -> list[int]:
     """Per fibre coordinate: the base coordinate of the element's target node that it
     copies (the C's ``node_copies``: a pair factor's f = q_{k+1}), or −1 (an increment
     ξ = τ⁻¹(w)/h, or anything else). The run time reads a state (x, v) into a first
-    fibre through it, f_a = x_j + h·v_a or v_a (:mod:`._runtime.legendre`), and the
+    fibre through it, f_a = x_j + h·v_a or v_a (:mod:`._runtime.step.legendre`), and the
     velocity of a path out of it (:mod:`symvi.plots`)."""
     nodes = [-1] * dm.fibre_dim
     for copy in dm.c_context.node_copies:
@@ -77,7 +80,7 @@ def fibre_nodes(dm: DerivedModel) -> list[int]:
 
 def info(dm: DerivedModel, key: str, description: str) -> ModelInfo:
     """The package's ``INFO``: what the run time needs to know of the model, typed
-    (:class:`~symvi._runtime.model_info.ModelInfo`, written as its literal)."""
+    (:class:`~symvi._runtime.core.model_info.ModelInfo`, written as its literal)."""
     return ModelInfo(
         version=MODEL_INFO_VERSION, name=dm.name, kind=dm.kind, order=dm.order,
         source_dim=dm.source_dim, fibre_dim=dm.fibre_dim,
@@ -132,6 +135,8 @@ def write_package(folder: Path, dm: DerivedModel, src: CSource, key: str, descri
     """
     with writing(folder, "create"):
         (folder / "_runtime").mkdir(parents=True)
+        for part in sorted({path.parent for path in runtime_files()} - {PACKAGE / "_runtime"}):
+            (folder / part.relative_to(PACKAGE)).mkdir()
     with writing(built, "read the compiled extension"):
         extension = built.read_bytes()
     write_file(folder / built.name, extension)
@@ -139,7 +144,7 @@ def write_package(folder: Path, dm: DerivedModel, src: CSource, key: str, descri
     for name, text in src.units:
         write_file(folder / f"{dm.name}_{name}.c", text)
     for path in runtime_files():
-        write_file(folder / "_runtime" / path.name, path.read_bytes())
+        write_file(folder / path.relative_to(PACKAGE), path.read_bytes())
     imported = {rel: record["sha256"] for rel, record in file_records(folder).items()
                 if not rel.endswith(".c")}
     init = _render_init(dm, key, description, built.name.split(".")[0], version, imported)

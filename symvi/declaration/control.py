@@ -24,7 +24,7 @@ L_d(g_{k−1}, g_k) + L_d(g_k, g_{k+1}) at g_k (paper §2.2), u_k = −D_{k,a}/h
 and L̃_d = h C(q, y, u_k). Its discrete Noether identity is exact: for a symmetry Z of L
 with no actuated component, Σ_k Z(x_k)·Φ_d^k telescopes to boundary terms, so the
 constraints are exactly dependent and the multipliers are fixed only up to λ^k + c Z(x_k).
-The compiled ``gauge`` kernel lets the solver fix c (:mod:`symvi._runtime.gauge`), where
+The compiled ``gauge`` kernel lets the solver fix c (:mod:`symvi._runtime.bvp.gauge`), where
 with the paper's rule the identity holds only to O(h⁴) and the optimality system is
 singular in double precision from N ≈ 100 (tests/test_constraint_degeneracy.py).
 """
@@ -232,11 +232,11 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
         inequalities hold at every window's quadrature point, bounds on controls for
         the discrete controls u_k (:mod:`symvi.declaration.inequalities`); with any of
         them the whole-trajectory solve is a primal–dual interior-point Newton
-        (:mod:`symvi._runtime.interior`).
+        (:mod:`symvi._runtime.bounded.interior`).
     time_cost:
         ρ > 0 (a number or an expression in the parameters) makes the horizon T free:
         the solve minimises J_d + ρ·T over the path and T = N·h, the ``h`` given to
-        ``solve_bvp`` being the first guess (:mod:`symvi._runtime.horizon`). Keep a
+        ``solve_bvp`` being the first guess (:mod:`symvi._runtime.bvp.horizon`). Keep a
         control cost in C: with C = 0 (pure minimum time) the optimality system is
         singular; a small ε|u|² gives nearly bang–bang controls.
     end:

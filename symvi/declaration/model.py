@@ -16,7 +16,7 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 import sympy as sp
 
-from .._runtime.signs import SIGNS
+from .._runtime.core.signs import SIGNS
 from .symbols import h, sign
 from ..errors import ModelError
 from ..groupoids.base import Groupoid, step_matrix

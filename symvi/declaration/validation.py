@@ -26,7 +26,7 @@ NONSMOOTH = (sp.Abs, sp.sign, sp.Heaviside, sp.DiracDelta, sp.Max, sp.Min, sp.fl
 #: Unevaluated operations symvi cannot compile.
 UNEVALUATED = (sp.Derivative, sp.Integral, sp.Sum, sp.Product, sp.Limit)
 #: Values that convert to a float but are not numbers: the run time refuses them for its
-#: numbers (``_runtime.arguments.real``), so a declaration refuses them where it takes one.
+#: numbers (``_runtime.core.arguments.real``), so a declaration refuses them where it takes one.
 NOT_NUMBERS = (str, bytes, bool, np.bool_)
 
 

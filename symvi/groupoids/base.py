@@ -317,7 +317,7 @@ class Groupoid(ABC):
     @property
     def initial_layout(self) -> str:
         """The name of the layout of step-map initial data (``INITIAL_LAYOUTS`` of
-        ``symvi/_runtime/paths.py``): ``"nodes"`` where a path is its nodes
+        ``symvi/_runtime/core/paths.py``): ``"nodes"`` where a path is its nodes
         (:attr:`elements_are_node_pairs`), else ``"elements"`` (x_0, g_0, f)."""
         return "nodes" if self.elements_are_node_pairs else "elements"
 

@@ -11,7 +11,7 @@ SLSQP's on the same discrete problem).
 
 The pole's equation EL(L)_θ = 0 is a second-order constraint with a multiplier per
 window, so the interior-point solve carries equality constraints beside the bounds, and
-its steps an inertia correction (``_runtime/interior.py``). There are other local
+its steps an inertia correction (``_runtime/bounded/interior.py``). There are other local
 optima: some perturbed guesses swing the pole round the other way (cost 20.47 at
 N = 250, no limit active). At N = 1000 it succeeds from 18 of 22 guesses of the
 robustness battery (README, "Bounds and path inequalities").

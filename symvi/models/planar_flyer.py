@@ -14,7 +14,7 @@ disc's centre seen from the body, c = g⁻¹·centre: it moves with the incremen
 c_{k+1} = w_k⁻¹·c_k (a right action), and the disc is r² − |c|² ≤ 0 at every window's
 middle node. Without the bounds the body brakes with its main thruster (f₁ < 0 on 107 of
 199 windows); the interior point started there stalls, and succeeds from that optimum
-moved toward the bounds by a quadratic penalty (``_runtime/penalty.py``).
+moved toward the bounds by a quadratic penalty (``_runtime/bounded/penalty.py``).
 """
 import numpy as np
 import sympy as sp

@@ -36,12 +36,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .assembly import Problem
+from ..bvp.assembly import Problem
 from .barrier import Inequalities
-from .newton import newton
-from .options import SolveOptions
-from .paths import Path
-from .results import Status
+from ..bvp.newton import newton
+from ..core.options import SolveOptions
+from ..core.paths import Path
+from ..core.results import Status
 
 #: The factor by which the largest violation must fall per certifying stage
 #: (:attr:`.options.SolveOptions.certifying_stages`) for the bounds to count as feasible.

@@ -36,7 +36,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .paths import Path
+from ..core.paths import Path
 
 # The most Newton steps per active set and the most active sets tried are the solve's
 # options (``polish_steps``, ``polish_rounds``: :class:`.options.SolveOptions`, read from

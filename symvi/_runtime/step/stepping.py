@@ -15,11 +15,11 @@ from typing import Mapping
 
 import numpy as np
 
-from . import arguments
-from .model_info import Kernel
-from .options import StepOptions
-from .results import State, Status, StepResult
-from .storage import Series, check_memory
+from ..core import arguments
+from ..core.model_info import Kernel
+from ..core.options import StepOptions
+from ..core.results import State, Status, StepResult
+from ..core.storage import Series, check_memory
 
 _FAILURE = {
     Status.MAX_ITERATIONS: "Newton's method did not converge in {maxiter} iterations",

@@ -28,7 +28,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .optimality import _sparse
-from .paths import Path, fibres
+from ..core.paths import Path, fibres
 
 #: Most node unknowns for which the dense SVD of A is computed (O(rows · columns²)).
 DENSE_LIMIT = 3000

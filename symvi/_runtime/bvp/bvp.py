@@ -19,21 +19,20 @@ from typing import Mapping
 
 import numpy as np
 
-from . import arguments, boundary_states
+from ..core import arguments
+from . import boundary_states
 from .assembly import Problem
 from .band import cholesky_pivot
-from .barrier import check_boundary_data
 from .gauge import check_boundary
 from .horizon import free_horizon
-from .bounded import bounded
 from .diagnosis import diagnose
-from .model_info import Kernel
+from ..core.model_info import Kernel
 from .newton import newton
 from .optimality import second_order
-from .options import SolveOptions
-from .paths import Path, initial_path
-from .results import BVPResult, Status
-from .storage import check_path_memory as check_memory
+from ..core.options import SolveOptions
+from ..core.paths import Path, initial_path
+from ..core.results import BVPResult, Status
+from ..core.storage import check_path_memory as check_memory
 
 
 def solve_steps(model, n_steps: int, from_states: bool) -> int:
@@ -166,6 +165,10 @@ def fixed_horizon(model, start, end, N: int, h: float, p, guess,
         return path
     problem = Problem(model, p, h)
     if model.inequalities:
+        # bvp/'s one import of bounded/, made only for a model with inequalities:
+        # bounded/ builds on bvp/, and a model without bounds never loads it.
+        from ..bounded.barrier import check_boundary_data
+        from ..bounded.bounded import bounded
         check_boundary_data(model, path, p, h)
         cold = not isinstance(guess, BVPResult)
         active = None if cold or guess.active is None \

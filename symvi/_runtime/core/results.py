@@ -3,17 +3,17 @@
 Pickling: by name, from symvi
 -----------------------------
 Each generated package carries its own copy of this file, in a private module
-(``_symvi_<name>_<hash>._runtime.results``) that no other process can import. So a result
+(``_symvi_<name>_<hash>._runtime.core.results``) that no other process can import. So a result
 does not pickle by its class: every class here pickles, through ``__reduce__``, as a call
 of :data:`HOME`'s ``_rebuild`` (a :class:`Status` as ``HOME.Status(value)``, a
 :class:`NewtonError` as ``HOME.NewtonError(result)``) with its fields by name, nested
 results, States and Statuses the same way. The pickle records that call as
-``getattr(importlib.import_module("symvi._runtime.results"), "_rebuild")``: loading it
+``getattr(importlib.import_module("symvi._runtime.core.results"), "_rebuild")``: loading it
 imports symvi's own copy of this file by name, with the standard library alone, whatever
 package made the result — the package itself is never needed. So:
 
 * a result pickled in one process loads in any process that has symvi installed, with
-  ``import pickle`` alone; it loads as symvi's class (``symvi._runtime.results``), which
+  ``import pickle`` alone; it loads as symvi's class (``symvi._runtime.core.results``), which
   counts as the package's for ``isinstance`` (below);
 * where symvi is not installed (a package used standalone, with numpy and cffi), results
   still pickle, but loading them raises ``ModuleNotFoundError: No module named 'symvi'``:
@@ -51,7 +51,7 @@ import numpy as np
 
 #: The module a pickle names for every class of this file: symvi's own copy, imported
 #: by name when the pickle loads (see the docstring).
-HOME = "symvi._runtime.results"
+HOME = "symvi._runtime.core.results"
 
 
 class _Shared(type):

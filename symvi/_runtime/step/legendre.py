@@ -19,10 +19,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import arguments
-from .geometry import check_base_points
-from .model_info import Kernel
-from .paths import initial_layout
+from ..core import arguments
+from ..core.geometry import check_base_points
+from ..core.model_info import Kernel
+from ..core.paths import initial_layout
 
 #: Newton iterations of the transform, and the relative size of a converged correction.
 MAXITER, XTOL = 30, 1e-14

@@ -19,9 +19,9 @@ from dataclasses import replace
 
 import numpy as np
 
-from .model_info import Kernel
-from .options import SolveOptions
-from .results import BVPResult, Status
+from ..core.model_info import Kernel
+from ..core.options import SolveOptions
+from ..core.results import BVPResult, Status
 
 
 def slope(model, result: BVPResult, p) -> float:

@@ -21,10 +21,10 @@ import numpy as np
 from . import batch_loop, stepping
 from .batch_arguments import Trajectories, trajectories
 from .legendre import TransformError, first_fibres
-from .options import StepOptions
-from .progress import Progress
-from .results import BatchResult, StepResult
-from .storage import bytes_per_node
+from ..core.options import StepOptions
+from ..core.progress import Progress
+from ..core.results import BatchResult, StepResult
+from ..core.storage import bytes_per_node
 
 #: Tasks per worker: small enough tasks that a slow trajectory does not idle the others.
 TASKS_PER_WORKER = 8

@@ -14,11 +14,11 @@ from __future__ import annotations
 import numpy as np
 
 from .interior import InteriorPoint
-from .newton import newton
-from .options import SolveOptions
-from .paths import Path
+from ..bvp.newton import newton
+from ..core.options import SolveOptions
+from ..core.paths import Path
 from .penalty import infeasibility, nearly_feasible
-from .results import BVPResult, Status
+from ..core.results import BVPResult, Status
 
 #: The failures after which the interior point starts again (and then tests infeasibility).
 FAILED = (Status.STALLED, Status.MAX_ITERATIONS)

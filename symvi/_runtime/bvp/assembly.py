@@ -13,8 +13,8 @@ import numpy as np
 from .band import factor, lu_solve, positive_definite, reciprocal_condition
 from .gauge import Gauge
 from .lifted import LIFT_FROM, LiftedSystem
-from .model_info import Kernel
-from .paths import Path
+from ..core.model_info import Kernel
+from ..core.paths import Path
 
 
 class Problem:

@@ -23,11 +23,11 @@ from dataclasses import replace
 
 import numpy as np
 
-from . import arguments
-from .geometry import check_base_points, check_configurations
-from .model_info import Kernel
-from .paths import node_velocities
-from .results import BVPResult, State
+from ..core import arguments
+from ..core.geometry import check_base_points, check_configurations
+from ..core.model_info import Kernel
+from ..core.paths import node_velocities
+from ..core.results import BVPResult, State
 
 
 def _moves_nodes(model) -> bool:

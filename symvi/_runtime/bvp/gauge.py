@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .model_info import Kernel
+from ..core.model_info import Kernel
 
 
 class Gauge:

@@ -9,7 +9,7 @@ import numpy as np
 
 from .band import product
 from .optimality import convexifying_shift
-from .paths import Path
+from ..core.paths import Path
 
 
 def curvature(model, ab: np.ndarray, bw: int, delta: np.ndarray, nodes: np.ndarray,

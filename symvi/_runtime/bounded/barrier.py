@@ -19,8 +19,8 @@ from __future__ import annotations
 import numpy as np
 from numpy.lib.stride_tricks import sliding_window_view
 
-from .model_info import Kernel
-from .paths import Path
+from ..core.model_info import Kernel
+from ..core.paths import Path
 
 #: Fraction-to-the-boundary parameter's floor: a step keeps s and z at least (1 − τ) of
 #: their current values, τ = max(TAU_MIN, 1 − μ) (Wächter & Biegler 2006, eq. 15).

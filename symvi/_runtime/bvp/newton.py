@@ -15,8 +15,8 @@ import numpy as np
 
 from .band import product
 from .globalisation import descent_step, line_search, natural_step
-from .options import SolveOptions
-from .results import Status
+from ..core.options import SolveOptions
+from ..core.results import Status
 
 #: A Newton correction at the residual's rounding level within this factor of the
 #: rounding floor (:meth:`.assembly.Problem.rounding_correction`), and not half the one

@@ -15,12 +15,12 @@ from typing import Mapping
 
 import numpy as np
 
-from .batch import NamedErrors, run_threads
-from .batch_arguments import points, solves
+from ..step.batch import NamedErrors, run_threads
+from .solve_arguments import points, solves
 from .bvp import solve_bvp
-from .options import SolveOptions
-from .progress import Progress
-from .results import BVPBatch, BVPResult
+from ..core.options import SolveOptions
+from ..core.progress import Progress
+from ..core.results import BVPBatch, BVPResult
 
 
 def solve_bvp_many(model, starts, ends, n_steps: int, h=None, params: Mapping | None = None,
@@ -47,7 +47,7 @@ def solve_bvp_many(model, starts, ends, n_steps: int, h=None, params: Mapping | 
     ``T`` and ``statuses`` are arrays over the batch; SUCCESS only when every solve
     succeeded. Ctrl-C stops after the solves under way. Every argument, each solve's step
     or horizon and parameters included, is checked before any solve
-    (:func:`.batch_arguments.solves`), and a batch whose results would not fit in memory
+    (:func:`.solve_arguments.solves`), and a batch whose results would not fit in memory
     together is refused with a ``MemoryError`` giving the estimate.
     """
     batch = solves(model, starts, ends, n_steps, h, params, T=T, guesses=guesses,
@@ -94,7 +94,7 @@ def continuation(model, start, end, n_steps: int, h=None, path: Mapping | None =
 
     Returns a :class:`BVPBatch` of the K solves in order, whose message names the
     failures. Every argument, each point's parameters included, is checked before the
-    first solve (:func:`.batch_arguments.points`), and a path whose results would not fit
+    first solve (:func:`.solve_arguments.points`), and a path whose results would not fit
     in memory together is refused with a ``MemoryError`` giving the estimate.
     """
     checked = points(model, start, end, n_steps, h, path, T=T, params=params,

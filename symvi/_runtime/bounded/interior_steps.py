@@ -15,8 +15,8 @@ from __future__ import annotations
 import numpy as np
 
 from .barrier import TAU_MIN, boundary_step, safeguarded
-from .globalisation import curvature
-from .paths import Path
+from ..bvp.globalisation import curvature
+from ..core.paths import Path
 
 #: Relative size of a correction below which a full step whose merit decrease is rounding
 #: may be taken by the natural monotonicity test instead (:func:`_natural`).

@@ -1,14 +1,15 @@
 """The arguments of the batch calls, checked before any work (issue 48).
 
 ``integrate_many``, ``solve_bvp_many`` and ``continuation`` (``batch.py``,
-``bvp_batch.py``), and the Dask calls of ``symvi/dask.py``, check what they are given with
-the functions here, and only here: the batch's size from its data (zero members is an
-error, not an empty success), every per-member value against it, the options, each
-member's step and parameters, and the memory the results will hold. A bad argument is
-refused with one message — the same on a cluster as on threads — before a thread or a
-task starts. What only the model's kernels can judge (a configuration off its group, a
-singular Legendre transform, boundary data of the wrong shape) is found in the run, which
-stops every worker at the first and names the member.
+``bvp_batch.py``; the solves' own checks are in ``bvp/solve_arguments.py``), and the Dask
+calls of ``symvi/dask.py``, check what they are given with the functions here, and only
+here: the batch's size from its data (zero members is an error, not an empty success),
+every per-member value against it, the options, each member's step and parameters, and
+the memory the results will hold. A bad argument is refused with one message — the same
+on a cluster as on threads — before a thread or a task starts. What only the model's
+kernels can judge (a configuration off its group, a singular Legendre transform, boundary
+data of the wrong shape) is found in the run, which stops every worker at the first and
+names the member.
 """
 from __future__ import annotations
 
@@ -18,19 +19,15 @@ from typing import Callable, Mapping
 
 import numpy as np
 
-from . import arguments, boundary_states, stepping
-from .memory import require
-from .options import SolveOptions, StepOptions
-from .results import State
-from .bvp import solve_steps
-from .storage import bytes_per_node, check_path_memory
+from ..core import arguments
+from ..core.memory import require
+from ..core.options import StepOptions
+from ..core.results import State
+from ..core.storage import bytes_per_node
+from . import stepping
 
 #: How a batch calls its members, one and many: "trajectory 2", "a batch of 4 solves".
 TRAJECTORIES = ("trajectory", "trajectories")
-SOLVES = ("solve", "solves")
-
-#: What an unknown option's refusal adds in a batch of solves.
-NOT_RAISING = " (a batch keeps each failure in its result, it does not raise)"
 
 
 @dataclass(frozen=True)
@@ -73,35 +70,6 @@ class Trajectories:
     quantities: bool
 
 
-@dataclass(frozen=True)
-class Solves:
-    """``solve_bvp_many``'s arguments, checked: solve b from ``start_of(b)`` to
-    ``end_of(b)`` (None without fixed ends), with ``steps[b]`` or ``horizons[b]`` (the
-    other None), ``overrides(b)`` and ``guesses[b]``; ``options`` go to every solve."""
-
-    start_of: Callable[[int], object]
-    end_of: Callable[[int], object]
-    size: int
-    n_steps: int
-    steps: np.ndarray | None
-    horizons: np.ndarray | None
-    overrides: Overrides
-    guesses: list | None
-    workers: int
-    options: SolveOptions
-
-
-@dataclass(frozen=True)
-class Points:
-    """``continuation``'s arguments, checked: the overrides of each of its ``size``
-    points, and the ``options`` of every solve."""
-
-    points: list[dict]
-    size: int
-    n_steps: int
-    options: SolveOptions
-
-
 def trajectories(model, initial, n_steps: int, h, params: Mapping | None, *,
                  workers: int | None, keep_every: int, final_only: bool, quantities: bool,
                  maxiter: int = StepOptions.unset("maxiter"),
@@ -127,59 +95,6 @@ def trajectories(model, initial, n_steps: int, h, params: Mapping | None, *,
     parameters = _parameter_vectors(model, overrides, B, TRAJECTORIES)
     return Trajectories(item, B, isinstance(initial, State), steps, overrides, parameters,
                         n_steps, keep, workers, options, quantities)
-
-
-def solves(model, starts, ends, n_steps: int, h, params: Mapping | None, *, T,
-           guesses: list | None, workers: int | None,
-           options: SolveOptions | Mapping | None = None,
-           keywords: Mapping | None = None) -> Solves:
-    """The arguments of ``solve_bvp_many`` (its docstring says what each is), checked in
-    full: the batch, the options, the model's whole-trajectory solve and N, the memory of
-    the results, then each solve's step or horizon and parameters."""
-    start_of, B = batch_items(starts, "starts", SOLVES)
-    end_of = (lambda b: None) if ends is None else _same_batch(ends, B)
-    steps = None if h is None else per_member(h, B, "h", SOLVES)
-    horizons = None if T is None else per_member(T, B, "T", SOLVES)
-    overrides = parameter_batch(params, B, SOLVES)
-    guesses = _guesses(guesses, B)
-    workers = worker_count(workers)
-    options = SolveOptions.of(options, keywords, "solve_bvp_many", NOT_RAISING)
-    from_states = boundary_states.given(starts, ends)
-    N = solve_steps(model, n_steps, from_states)
-    check_path_memory(model, N + from_states)     # each solve's matrices, before any
-    _results_fit(model, B, N, from_states, f"a batch of {B:,} solves",
-                 "solve the batch in parts (keeping only what each needs) or with fewer "
-                 "steps")
-    _steps_or_horizons(h, T, steps, horizons, N)
-    _parameter_vectors(model, overrides, B, SOLVES)
-    return Solves(start_of, end_of, B, N, steps, horizons, overrides, guesses, workers,
-                  options)
-
-
-def points(model, start, end, n_steps: int, h, path: Mapping | None, *, T,
-           params: Mapping | None, options: SolveOptions | Mapping | None = None,
-           keywords: Mapping | None = None) -> Points:
-    """The arguments of ``continuation`` (its docstring says what each is), checked in
-    full: the path, N, the step, the options, the memory of the results, then each
-    point's parameters."""
-    columns = _path_columns(path)
-    if params is not None and not isinstance(params, Mapping):
-        raise ValueError(f"params must be a mapping name → value, got "
-                         f"{type(params).__name__}")
-    K = len(next(iter(columns.values())))
-    from_states = boundary_states.given(start, end)
-    N = solve_steps(model, n_steps, from_states)
-    check_path_memory(model, N + from_states)
-    arguments.step_of(h, T, N)
-    options = SolveOptions.of(options, keywords, "continuation", NOT_RAISING)
-    _results_fit(model, K, N, from_states, f"a continuation of {K:,} solves",
-                 "split the path into parts, each warm-started from the last result of "
-                 "the one before (guess=), keeping only what each needs")
-    fixed = dict(params or {})
-    overrides = [fixed | {name: values[k] for name, values in columns.items()}
-                 for k in range(K)]
-    _each(SOLVES, K, lambda k: model.params(overrides[k]))
-    return Points(overrides, K, N, options)
 
 
 def batch_items(value, what: str, kind: tuple[str, str]) -> tuple[Callable[[int], object], int]:
@@ -256,20 +171,6 @@ def worker_count(workers: int | None) -> int:
     return arguments.count(workers if workers is not None else usable_cores(), "workers", 1)
 
 
-def result_bytes(model, n_steps: int, from_states: bool) -> float:
-    """Bytes one solve's result holds: per node its time, base point, configuration and
-    fibre, the multipliers, controls, bound multipliers and active flags of its window;
-    from States also the solved states and their times."""
-    info = model.info
-    configuration = info.configuration_dim
-    inequalities = len(model.inequalities)
-    per_node = 8 * (1 + model.m + configuration + model.n + model.constraints
-                    + info.controls + inequalities) + inequalities
-    if from_states:
-        per_node += 8 * (1 + model.m + configuration + model.n)
-    return float((n_steps + 1 + from_states) * per_node)
-
-
 def _paths_fit(model, B: int, n_steps: int, keep: int, quantities: bool) -> None:
     """Refuse a batch whose paths (with their ``quantities`` or without) would not fit:
     each is held twice — its own result, then the stacked arrays (on a cluster: the
@@ -278,14 +179,6 @@ def _paths_fit(model, B: int, n_steps: int, keep: int, quantities: bool) -> None
     require(2.0 * B * nodes * bytes_per_node(model, quantities),
             f"a batch of {B:,} paths of {nodes:,} stored nodes",
             "store every k-th node (keep_every=k) or only the final one (final_only=True)")
-
-
-def _results_fit(model, count: int, N: int, from_states: bool, what: str, hint: str) -> None:
-    """Refuse ``count`` solves whose results would not fit together (each solve's own
-    matrices: :func:`.storage.check_path_memory`)."""
-    require(count * result_bytes(model, N, from_states),
-            f"{what} with N = {N:,} ({result_bytes(model, N, from_states) / 2**20:.3g} MiB "
-            f"each)", hint)
 
 
 def _positive(values: np.ndarray | None, uniform: bool, kind: tuple[str, str],
@@ -300,17 +193,6 @@ def _positive(values: np.ndarray | None, uniform: bool, kind: tuple[str, str],
         check(float(values[0]))
     elif bad.size:
         _named(kind, int(bad[0]), check, float(values[bad[0]]))
-
-
-def _steps_or_horizons(h, T, steps: np.ndarray | None, horizons: np.ndarray | None,
-                       N: int) -> None:
-    """Exactly one of h and T given, and each solve's positive and finite."""
-    if (h is None) == (T is None):       # neither or both: one message for the batch
-        arguments.step_of(h, T, N)
-    if T is None:
-        _positive(steps, np.ndim(h) == 0, SOLVES, lambda v: arguments.step_of(v, None, N))
-    else:
-        _positive(horizons, np.ndim(T) == 0, SOLVES, lambda v: arguments.step_of(None, v, N))
 
 
 def _parameter_vectors(model, overrides: Overrides, B: int,
@@ -335,43 +217,3 @@ def _named(kind: tuple[str, str], b: int, check: Callable, *args):
     except ValueError as exc:
         raise ValueError(f"{kind[0]} {b}: {exc}") from None
 
-
-def _same_batch(ends, B: int) -> Callable[[int], object]:
-    end_of, size = batch_items(ends, "ends", SOLVES)
-    if size != B:
-        raise ValueError(f"ends: {size} given for a batch of {B} starts")
-    return end_of
-
-
-def _guesses(guesses, B: int) -> list | None:
-    """One first guess per solve, or None."""
-    if guesses is None:
-        return None
-    if isinstance(guesses, (str, bytes, Mapping)) or not hasattr(guesses, "__len__"):
-        raise ValueError(f"guesses must be a list of one guess per solve (or None), got "
-                         f"{type(guesses).__name__}")
-    if len(guesses) != B:
-        raise ValueError(f"guesses: {len(guesses)} given for a batch of {B} solves")
-    return list(guesses)
-
-
-def _path_columns(path) -> dict[object, np.ndarray]:
-    """A continuation's path: parameter names → K ≥ 1 values each."""
-    if path is not None and not isinstance(path, Mapping):
-        raise ValueError(f"path must be a mapping parameter name → sequence of values, got "
-                         f"{type(path).__name__}")
-    if not path:
-        raise ValueError("continuation needs a path: parameter names → sequences of values")
-    columns = {name: np.atleast_1d(arguments.real_array(values, f"path[{name!r}]"))
-               for name, values in path.items()}
-    for name, values in columns.items():
-        if values.ndim != 1:
-            raise ValueError(f"path[{name!r}] must be a sequence of numbers, got shape "
-                             f"{values.shape}")
-    lengths = {name: len(values) for name, values in columns.items()}
-    if len(set(lengths.values())) != 1:
-        raise ValueError(f"path: the sequences differ in length: {lengths}")
-    if not next(iter(lengths.values())):
-        raise ValueError("path: the sequences are empty (zero solves); give at least one "
-                         "value")
-    return columns

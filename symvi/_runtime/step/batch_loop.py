@@ -11,10 +11,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from .options import StepOptions
-from .results import BatchResult, Status
+from ..core.options import StepOptions
+from ..core.results import BatchResult, Status
 from .stepping import entries, finite, layout, outcome
-from .storage import first_kept, kept_count
+from ..core.storage import first_kept, kept_count
 
 #: Stored bytes of one trajectory's full path above which a batch is run trajectory by
 #: trajectory (the chunked single loop) instead: a slice holds whole paths.

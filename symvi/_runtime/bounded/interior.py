@@ -32,15 +32,15 @@ import sys
 
 import numpy as np
 
-from .band import cholesky_pivot
+from ..bvp.band import cholesky_pivot
 from .barrier import Inequalities, next_barrier
 from .interior_steps import step
-from .model_info import Kernel
-from .optimality import Curvature, second_order
-from .options import SolveOptions
-from .paths import Path
+from ..core.model_info import Kernel
+from ..bvp.optimality import Curvature, second_order
+from ..core.options import SolveOptions
+from ..core.paths import Path
 from .polish import SAMPLES, polish
-from .results import BVPResult, Status
+from ..core.results import BVPResult, Status
 
 # The barrier parameter's start and floor (mu_start, mu_floor·xtol), the test of a solved
 # barrier problem (kappa_epsilon) and of stagnation are the solve's options

@@ -1,0 +1,1 @@
+"""The bounded solve: the interior point, barrier and penalty for inequalities (SciPy)."""

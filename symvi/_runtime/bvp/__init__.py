@@ -1,0 +1,1 @@
+"""The whole-trajectory Newton: assembly, banded solves, globalisation, batches (SciPy)."""

@@ -1,0 +1,1 @@
+"""The run time's infrastructure: arguments, options, results, memory, paths — no solver."""
