@@ -414,3 +414,15 @@ def test_the_runtime_parts_run_one_way():
                         if m.lstrip(".").split(".")[0] in ("bvp", "bounded")}, name
         elif part(name) == "bvp":
             assert not {m for m in loaded if m.lstrip(".").split(".")[0] == "bounded"}, name
+
+
+def test_the_symbolic_side_looks_kernels_up_by_kernel_not_by_string():
+    """The checks and the derivation ask a DerivedModel for its kernels by the run time's
+    ``Kernel`` names (``dm.kernel(KernelName.STEP)``), not by free strings (issue 49)."""
+    pattern = re.compile(r"\.kernel\(\s*[\"']")
+    offending = [f"{path.relative_to(SYMVI.parent)}:{number}: {line.strip()}"
+                 for path in sorted(SYMVI.rglob("*.py"))
+                 for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1)
+                 if pattern.search(line)]
+    assert not offending, "kernels looked up by a string:\n" + "\n".join(offending)
+    assert pattern.search('derived.kernel("step")') and not pattern.search("dm.kernel(Kernel.STEP)")

@@ -88,6 +88,7 @@ from .jets import (TIME, _AlgebroidJets, _Jets, _layout, _variational_derivative
 from ..declaration.model import Model
 from .series import (_EXACT, _QQ, _Expander, _is_zero, _Poly, _Series, _series_of, _truncate,
                      expansion_scope)
+from .._runtime.core.model_info import Kernel as KernelName
 
 __all__ = ["TIME", "ResidualExpansion", "ConsistencyReport", "check_consistency", "compact",
            "euler_lagrange", "euler_lagrange_algebroid", "constraint_functions",
@@ -345,11 +346,11 @@ def _stencil_kernel(model: Model, dm: DerivedModel):
     the problem without its inequalities, which is what the continuous equations
     describe)."""
     if not model.constraints:
-        kernel = dm.kernel("step")
+        kernel = dm.kernel(KernelName.STEP)
         return dict(kernel.outputs)["residual"], kernel.z, kernel.definitions, 0, 0
     if "stencil" not in [k.name for k in dm.kernels]:
         raise ModelError(f"model {model.name!r} has constraints but no stencil kernel")
-    kernel, windows, s = dm.kernel("stencil"), dm.order + 1, dm.constraint_count
+    kernel, windows, s = dm.kernel(KernelName.STENCIL), dm.order + 1, dm.constraint_count
     per = s + len(dm.inequality_names)
     head = len(kernel.z) - windows * per
     bound = {kernel.z[head + w * per + k]: sp.S.Zero
@@ -375,7 +376,7 @@ def residual_expansion(model: Model, *, derived: DerivedModel | None = None,
     """
     dm = derived if derived is not None else derive(discretise(model))
     if model.groupoid.elements_are_node_pairs and not model.constraints:
-        kernel = dm.kernel("step")
+        kernel = dm.kernel(KernelName.STEP)
         residual = dict(kernel.outputs)["residual"]
         n, r = dm.fibre_dim, dm.order
         nodes = [kernel.z[i * n:(i + 1) * n] for i in range(2 * r + 1)]
@@ -409,7 +410,7 @@ def constraint_expansion(model: Model, *, derived: DerivedModel | None = None,
     if not model.constraints:
         raise ModelError(f"model {model.name!r} has no constraints")
     dm = derived if derived is not None else derive(discretise(model))
-    kernel = dm.kernel("constraint")
+    kernel = dm.kernel(KernelName.CONSTRAINT)
     value = dict(kernel.outputs)["value"]
     r = dm.order
     through = min(3, max_power)

@@ -23,6 +23,7 @@ from ..derivation.differentiate import engine_function
 from .budget import SKIPPED
 from .noether import readable
 from .report import CheckResult
+from .._runtime.core.model_info import Kernel as KernelName
 
 NAME = "regularity"
 #: Largest matrix (rows) and total operation count for which the determinant is factored.
@@ -60,7 +61,7 @@ def _matrix(ctx):
     dm = ctx.discrete
     if not dm.constraints:
         try:
-            kernel = ctx.derived.kernel("step")
+            kernel = ctx.derived.kernel(KernelName.STEP)
         except ModelError:          # derive refuses singular models; measure it here
             return step_jacobian(dm)
         m, n, K = dm.groupoid.source_dim, dm.groupoid.fibre_dim, 2 * dm.order

@@ -17,6 +17,7 @@ import sympy as sp
 from ..discretisation.discretise import DiscreteModel, discretise, h as STEP, slot_symbols
 from ..errors import ModelError
 from .jets import continuous_equations
+from .._runtime.core.model_info import Kernel as KernelName
 
 if TYPE_CHECKING:
     from .hand import HandDerived
@@ -163,7 +164,7 @@ def _residual_window(model, discrete, derived) -> tuple[list, dict, list, list]:
     g = model.groupoid
     dk = derived if derived is not None else _derive(model, discrete)
     try:
-        kernel = dk.kernel("step")
+        kernel = dk.kernel(KernelName.STEP)
     except StopIteration:
         raise ModelError(f"model {model.name!r} has no step residual (constrained models "
                          f"are solved as whole trajectories)") from None

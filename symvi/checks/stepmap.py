@@ -62,6 +62,7 @@ import sympy as sp
 from ..derivation.derive import DerivedModel
 from ..groupoids.base import Groupoid
 from .tape import ForwardTape
+from .._runtime.core.model_info import Kernel as KernelName
 
 #: Default time step of a :class:`StepMap`.
 STEP = 0.1
@@ -172,12 +173,12 @@ class StepMap:
         self.r, self.m, self.n = derived.order, derived.source_dim, derived.fibre_dim
         values = dict(zip(derived.parameters, derived.defaults)) | dict(parameters or {})
         fixed = {p: values[p] for p in derived.parameters} | {derived.step: self.h}
-        self._residual = ForwardTape(derived.kernel("step"), "residual", fixed)
-        self._predict = ForwardTape(derived.kernel("predict"), "guess", fixed)
-        self._momentum = ForwardTape(derived.kernel("momentum_minus"), "momentum", fixed)
-        self._target = ForwardTape(derived.kernel("target"), "target", fixed)
-        self._right = ForwardTape(derived.kernel("variations"), "right", fixed)
-        self._left = ForwardTape(derived.kernel("variations"), "left", fixed)
+        self._residual = ForwardTape(derived.kernel(KernelName.STEP), "residual", fixed)
+        self._predict = ForwardTape(derived.kernel(KernelName.PREDICT), "guess", fixed)
+        self._momentum = ForwardTape(derived.kernel(KernelName.MOMENTUM_MINUS), "momentum", fixed)
+        self._target = ForwardTape(derived.kernel(KernelName.TARGET), "target", fixed)
+        self._right = ForwardTape(derived.kernel(KernelName.VARIATIONS), "right", fixed)
+        self._left = ForwardTape(derived.kernel(KernelName.VARIATIONS), "left", fixed)
         A = groupoid.algebroid()
         self._anchor = sp.lambdify([A.q], A.anchor, "numpy")
         self._structure = sp.lambdify([A.q], list(A.structure), "numpy")

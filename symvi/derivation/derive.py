@@ -33,6 +33,7 @@ from ..discretisation.discretise import DiscreteModel
 from ..errors import ModelError
 from ..groupoids.analytic import used_coefficients
 from ..groupoids.base import CContext
+from .._runtime.core.model_info import Kernel as KernelName
 from ..declaration.rank import generic_rank
 from .differentiate import (_UNTRANSLATABLE, _Translation, engine_function, gradient,
                             gradient_and_hessian, jacobian)
@@ -109,8 +110,11 @@ class DerivedModel:
         """K = 2r: elements in the stencil of one residual."""
         return 2 * self.order
 
-    def kernel(self, name: str) -> Kernel:
-        return next(k for k in self.kernels if k.name == name)
+    def kernel(self, name: KernelName | str) -> Kernel:
+        """The kernel ``name``: a :class:`~symvi._runtime.core.model_info.Kernel` (the
+        names the run time calls), or the name of an end stencil ``stencil_end<j>``."""
+        key = name.value if isinstance(name, KernelName) else name
+        return next(k for k in self.kernels if k.name == key)
 
 
 @dataclass(frozen=True)
