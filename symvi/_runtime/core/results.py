@@ -75,10 +75,14 @@ class _Shared(type):
     def __subclasscheck__(cls, sub) -> bool:
         if type.__subclasscheck__(cls, sub):
             return True
+        # only a class of some copy of this file can stand for one: the layouts (fields)
+        # are compared for those alone, so that isinstance(array, State) stays cheap
+        others = [k for k in getattr(sub, "__mro__", ())
+                  if getattr(type(k), "symvi_layout", None) is not None]
+        if not others:
+            return False
         layout = cls.symvi_layout()
-        return any(getattr(type(k), "symvi_layout", None) is not None
-                   and type(k).symvi_layout(k) == layout
-                   for k in getattr(sub, "__mro__", ()))
+        return any(type(k).symvi_layout(k) == layout for k in others)
 
 
 class _SharedEnum(_Shared, enum.EnumMeta):
