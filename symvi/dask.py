@@ -57,12 +57,9 @@ def integrate_many(client, package: ModuleType, initial, n_steps: int, h,
     batch = batch_arguments.trajectories(**_arguments(
         _local_integrate_many, package.model, initial, n_steps, h, params, **options))
     options = _plain_options(options, batch.options)
-    chunk = _chunk(chunk)
-    with Progress(batch.size, "trajectories", progress) as bar:
-        futures = [client.submit(_run_fields, folder, "integrate_many",
-                                 *_trajectory_task(batch, options, rows), pure=False)
-                   for rows in _ranges(batch.size, chunk)]
-        parts = _gathered(client, futures, bar)
+    parts = _submitted(client, _run_fields, folder, "integrate_many", batch.size, chunk,
+                       "trajectories", progress,
+                       lambda rows: _trajectory_task(batch, options, rows))
     return BatchResult.joined([_batch(fields) for fields in parts])
 
 
@@ -77,13 +74,21 @@ def solve_bvp_many(client, package: ModuleType, starts, ends, n_steps: int, h=No
     batch = solve_arguments.solves(**_arguments(
         _local_solve_bvp_many, package.model, starts, ends, n_steps, h, params, **options))
     options = _plain_options(options, batch.options)
-    chunk = _chunk(chunk)
-    with Progress(batch.size, "solves", progress) as bar:
-        futures = [client.submit(_run, folder, "solve_bvp_many",
-                                 *_solve_task(batch, ends is None, options, rows), pure=False)
-                   for rows in _ranges(batch.size, chunk)]
-        parts = _gathered(client, futures, bar)
+    parts = _submitted(client, _run, folder, "solve_bvp_many", batch.size, chunk, "solves",
+                       progress, lambda rows: _solve_task(batch, ends is None, options, rows))
     return BVPBatch.of([r for part in parts for r in part.results])
+
+
+def _submitted(client, run: Callable, folder: str, method: str, size: int, chunk,
+               what: str, progress: bool | None, task: Callable[[range], tuple]) -> list:
+    """The results of ``run(folder, method, *task(rows))`` on the workers, one task per
+    ``chunk`` members of the batch of ``size`` (``chunk`` checked first), in order; a bar
+    counts the ``what`` finished."""
+    chunk = _chunk(chunk)
+    with Progress(size, what, progress) as bar:
+        futures = [client.submit(run, folder, method, *task(rows), pure=False)
+                   for rows in _ranges(size, chunk)]
+        return _gathered(client, futures, bar)
 
 
 def _arguments(local: Callable, model, *args, **options) -> dict:
