@@ -206,6 +206,10 @@ MUTABLE_CALLS = {"dict", "list", "set", "OrderedDict", "defaultdict", "deque", "
 KEPT = {
     ("symvi/build/__init__.py", "_LOAD_LOCK"):
         "guards sys.modules, which is process-wide by nature, while a package loads",
+    ("symvi/derivation/derive.py", "PROCESS_CACHE"):
+        "the derivations a process shares by default (the build, the checks and a test "
+        "session derive the same models); an explicit object passed as derive's default "
+        "argument, which a caller replaces with its own",
 }
 
 
@@ -266,6 +270,10 @@ def mutable_state(path: Path) -> list[tuple[str, int, str]]:
     found = []
     functions = [n for n in ast.walk(tree)
                  if isinstance(n, (ast.FunctionDef, ast.AsyncFunctionDef, ast.Lambda))]
+    found += [(t.id, node.lineno, "a cache held by the module") for node in tree.body
+              if isinstance(node, ast.Assign) and isinstance(node.value, ast.Call)
+              and getattr(node.value.func, "id", "").endswith("Cache")
+              for t in node.targets if isinstance(t, ast.Name)]
     for function in functions:
         for node in ast.walk(function):
             if isinstance(node, ast.Global):
@@ -286,17 +294,20 @@ def test_no_module_level_mutable_state():
 
 
 def test_the_state_scan_finds_state(tmp_path):
-    """The scan sees a cache dict filled in a function, a lock taken, ``global`` and a
-    write through ``globals()``; not a constant built while the module loads."""
+    """The scan sees a cache dict filled in a function, a lock taken, ``global``, a
+    write through ``globals()`` and a cache object held by the module; not a constant
+    built while the module loads."""
     source = tmp_path / "m.py"
     source.write_text("import threading\n"
                       "_MEMO = {}\n_LOCK = threading.Lock()\nCOUNT = 0\nTABLE = []\n"
+                      "SHARED = DerivationCache()\n"
                       "TABLE.append(1)\nNAMES = ('a', 'b')\n"
                       "def f(k):\n    with _LOCK:\n        _MEMO[k] = 1\n"
                       "def g():\n    global COUNT\n    COUNT += 1\n"
                       "def h():\n    globals()['x'] = 1\n    return TABLE[0], NAMES\n")
     assert [(n, w) for n, _, w in mutable_state(source)] == [
-        ("COUNT", "global statement"), ("_LOCK", "changed in a function"),
+        ("COUNT", "global statement"), ("SHARED", "a cache held by the module"),
+        ("_LOCK", "changed in a function"),
         ("_MEMO", "changed in a function"), ("globals()", "changed in a function")]
 
 

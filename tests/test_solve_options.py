@@ -251,6 +251,9 @@ def test_an_unknown_step_option_is_refused_by_name(compiled):
     (dict(penalty_stages=(1e4, 1e2)), ValueError, r"^penalty_stages must be a non-empty, "
                                                   r"increasing sequence"),
     (dict(horizon_retries=-1), ValueError, r"^horizon_retries must be at least 0"),
+    (dict(penalty_stages=(1e6,), certifying_stages=(1e2, 1e3)), ValueError,
+     r"^certifying_stages must continue penalty_stages: its first penalty 100 is not "
+     r"above their last 1e\+06"),
 ])
 def test_each_value_is_checked_once_where_it_is_declared(given, error, pattern):
     with pytest.raises(error, match=pattern):

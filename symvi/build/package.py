@@ -8,7 +8,6 @@ User text (the model's name, description, parameter names, ...) reaches
 from __future__ import annotations
 
 import ast
-import importlib
 from pathlib import Path
 from typing import Any
 
@@ -25,10 +24,6 @@ from .._runtime.core.model_info import GroupInfo, Kernel, KernelInfo, ModelInfo
 #: The symvi package folder (its sources are part of the cache key).
 PACKAGE = Path(__file__).resolve().parent.parent
 
-# Importing symvi registers the result classes of its run-time files under their
-# canonical name (see ``_runtime/core/results.py``), so that a process with symvi unpickles
-# the results of the packages built from them without importing one.
-importlib.import_module(f"{__package__.rpartition('.')[0]}._runtime.core.results")
 
 
 def runtime_files() -> list[Path]:

@@ -46,7 +46,7 @@ class Kernel:
     ``outputs`` maps names to SymPy matrices (row-major flattening in C).
     """
 
-    name: str
+    name: KernelName | str
     z: tuple[sp.Symbol, ...]
     outputs: tuple[tuple[str, sp.Matrix], ...]
     doc: str
@@ -56,6 +56,11 @@ class Kernel:
     #: Whether z is a window of consecutive elements (x_0, f_0, …), so that the kernel
     #: can be evaluated along a path.
     along: bool = True
+
+    def __post_init__(self) -> None:
+        # named by the run time's enum (a string only for an end stencil stencil_end<j>)
+        if isinstance(self.name, KernelName):
+            object.__setattr__(self, "name", self.name.value)
 
 
 @dataclass(frozen=True, eq=False)
@@ -289,34 +294,35 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
     kernels = [] if constrained else _step_kernels(
         dm, engine, plain, engine.variation(plain, r, range(r + 1)) if windowed else residual)
     kernels += [
-        Kernel("target", one.z, (("target", target),), "β(x, f)"),
-        Kernel("variations", one.z, (("right", g.right(one.xs[0], one.fs[0], dm.step)),
+        Kernel(KernelName.TARGET, one.z, (("target", target),), "β(x, f)"),
+        Kernel(KernelName.VARIATIONS, one.z, (("right", g.right(one.xs[0], one.fs[0], dm.step)),
                                      ("left", g.left(one.xs[0], one.fs[0], dm.step))),
                "node variations of one element: d(x, f)/dε of g·σ_a(ε) and σ_a(ε)⁻¹·g"),
-        _in_increments(Kernel("lagrangian", window.z,
+        _in_increments(Kernel(KernelName.LAGRANGIAN, window.z,
                               (("value", sp.Matrix([engine.lagrangian(window, 0)])),),
                               "L_d on one window of r elements", window.definitions),
                        window, sources),
     ]
     manifold = g.manifold(one.xs[0])
     if manifold:
-        kernels.append(Kernel("manifold", one.xs[0], (("value", sp.Matrix(manifold)),),
+        kernels.append(Kernel(KernelName.MANIFOLD, one.xs[0], (("value", sp.Matrix(manifold)),),
                               "equations F(x) = 0 of the base manifold at a base point",
                               along=False))
     if g.whole_trajectory:
         eta = tuple(sp.Dummy(f"eta_{a}", real=True) for a in range(g.fibre_dim))
         kernels += [
             _in_increments(Kernel(
-                "stencil", full.z,
+                KernelName.STENCIL, full.z,
                 (("residual", residual), ("jacobian", full.total_jacobian(residual))),
                 "residual and its Jacobian with respect to every stencil coordinate "
                 "(multipliers of the r+1 windows last)",
                 full.definitions + full.jacobian_definitions, along=not windowed),
                 full, sources),
-            Kernel("move", one.xs[0] + eta, (("x", sp.Matrix(g.move(one.xs[0], eta))),),
+            Kernel(KernelName.MOVE, one.xs[0] + eta, (("x", sp.Matrix(g.move(one.xs[0], eta))),),
                    "base point of a node after the variation g -> g tau(eta)", along=False)]
-    for name, exprs, what in (("constraint", dm.constraints, "discrete constraints Phi_d"),
-                              ("inequality", dm.inequalities, "inequalities c <= 0")):
+    for name, exprs, what in (
+            (KernelName.CONSTRAINT, dm.constraints, "discrete constraints Phi_d"),
+            (KernelName.INEQUALITY, dm.inequalities, "inequalities c <= 0")):
         if exprs:
             values = engine.window_values(window, 0, exprs)
             kernels.append(Kernel(
@@ -326,7 +332,7 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
     if dm.boundary_inequalities:
         on_one = _on_element(dm, one, 0)
         kernels.append(Kernel(
-            "boundary", one.z,
+            KernelName.BOUNDARY, one.z,
             (("value", sp.Matrix([c.xreplace(on_one) for c in dm.boundary_inequalities])),),
             "the inequalities without controls on one element (first-order rule): the "
             "check of the fixed boundary elements"))
@@ -337,12 +343,12 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
     if dm.gauges:
         sections = [c for _, z in dm.gauges for c in z]
         kernels.append(Kernel(
-            "gauge", window.z, (("value", engine.window_values(window, 0, sections)),),
+            KernelName.GAUGE, window.z, (("value", engine.window_values(window, 0, sections)),),
             "sections Z of the symmetries on which the constraints depend exactly, at the "
             "window's middle node (one row of constraint components per symmetry)",
             window.definitions))
     if dm.controls:
-        kernels.append(Kernel("controls", window.z,
+        kernels.append(Kernel(KernelName.CONTROLS, window.z,
                               (("value", engine.window_values(window, 0, dm.controls)),),
                               "controls u at the window's quadrature point", window.definitions))
     if dm.time_cost is not None:
@@ -350,17 +356,17 @@ def _kernels(dm: DiscreteModel) -> tuple[Kernel, ...]:
             window, 0, dm.window_constraints))
         derivative = [_at_fixed_elements(dm, e, window.fs) for e in parts]
         kernels.append(Kernel(
-            "horizon", window.z, (("value", sp.Matrix(derivative + [dm.time_cost])),),
+            KernelName.HORIZON, window.z, (("value", sp.Matrix(derivative + [dm.time_cost])),),
             "∂/∂h at fixed elements of L_d, Φ_d and c on one window, then ρ (a free "
             "horizon: dJ/dT by the envelope theorem)", window.definitions))
     if dm.symmetries and not constrained:
         half = _stencil(dm, 2 * r - 1)
-        kernels.append(Kernel("noether", half.z, (("value", noether_quantities(dm, engine, half)),),
+        kernels.append(Kernel(KernelName.NOETHER, half.z, (("value", noether_quantities(dm, engine, half)),),
                               "conserved F_Z of the declared symmetries at node r−1 (§4.4)",
                               half.definitions))
     if r == 1:
         energy = _energy(dm, engine.lagrangian(one, 0), one.fs[0])
-        kernels.append(Kernel("energy", one.z, (("value", sp.Matrix([energy])),),
+        kernels.append(Kernel(KernelName.ENERGY, one.z, (("value", sp.Matrix([energy])),),
                               "discrete energy E_d = −∂L_d/∂h (Kane, Marsden & Ortiz)"))
     return tuple(kernels)
 
@@ -433,12 +439,12 @@ def _end_kernels(dm: DiscreteModel, engine: "_Engine", sources) -> list[Kernel]:
         one = _stencil(dm, 1)
         values = sp.Matrix([psi.xreplace(_on_element(dm, one, 0)) for psi in dm.end_conditions])
         kernels.append(Kernel(
-            "end_condition", one.z, (("value", values), ("jacobian", one.total_jacobian(values))),
+            KernelName.END_CONDITION, one.z, (("value", values), ("jacobian", one.total_jacobian(values))),
             "end conditions psi = 0 on the last element and their Jacobian",
             one.definitions + one.jacobian_definitions, along=False))
         if dm.time_cost is not None:    # ν·∂ψ/∂h enters dJ*/dT (a ξ = τ⁻¹(w)/h moves with h)
             kernels.append(Kernel(
-                "end_horizon", one.z,
+                KernelName.END_HORIZON, one.z,
                 (("value", values.applyfunc(lambda e: _at_fixed_elements(dm, e, one.fs))),),
                 "d psi/dh at a fixed last element (a free horizon's dJ/dT)", one.definitions,
                 along=False))
@@ -497,10 +503,10 @@ def _lifted_kernels(dm: DiscreteModel, engine: "_Engine", window: _Stencil,
     cv = sp.Matrix(c)
     duals = tuple((name, jacobian(side(one.xs[0], one.fs[0], dm.step).T * cv, one.z))
                   for name, side in (("left", g.left), ("right", g.right)))
-    return [Kernel("window_hessian", z, (("gradient", gradient), ("hessian", hessian)),
+    return [Kernel(KernelName.WINDOW_HESSIAN, z, (("gradient", gradient), ("hessian", hessian)),
                    "gradient and Hessian of L_d + lambda.Phi_d on one window (x_w, f_w, "
                    "f_{w+1}, lambda_w)", along=False),
-            Kernel("variations_dual", one.z + c, duals,
+            Kernel(KernelName.VARIATIONS_DUAL, one.z + c, duals,
                    "d/d(x, f) of left(x, f)^T c and right(x, f)^T c: the curvature of the node "
                    "variations along a covector c", along=False)]
 
@@ -566,15 +572,15 @@ def _step_kernels(dm: DiscreteModel, engine: _Engine, full: _Stencil,
     p_plus = _stack([engine.variation(half, j, range(r)) for j in range(r, 2 * r)])
     p_minus = -_stack([engine.variation(half, j, range(r)) for j in range(r)])
     return [
-        Kernel("step", full.z, (("residual", residual), ("jacobian", jacobian(residual, unknown))),
+        Kernel(KernelName.STEP, full.z, (("residual", residual), ("jacobian", jacobian(residual, unknown))),
                "discrete Euler–Lagrange residual at the middle node and ∂R/∂f_{K−1}",
                full.definitions),
-        Kernel("predict", full.z, (("guess", guess),),
+        Kernel(KernelName.PREDICT, full.z, (("guess", guess),),
                "explicit guess of f_{K−1} from the earlier elements", full.definitions),
-        Kernel("momentum_plus", half.z, (("momentum", p_plus),),
+        Kernel(KernelName.MOMENTUM_PLUS, half.z, (("momentum", p_plus),),
                "F⁺L_d: momenta at the last r nodes from the 2r−1 elements before them",
                half.definitions),
-        Kernel("momentum_minus", half.z, (("momentum", p_minus),)
+        Kernel(KernelName.MOMENTUM_MINUS, half.z, (("momentum", p_minus),)
                + ((("jacobian", half.total_jacobian(p_minus, half.fs[0])),) if r == 1 else ()),
                "F⁻L_d: momenta at the first r nodes from the 2r−1 elements after them "
                "(first order: and ∂/∂f₀, for the discrete Legendre transform of a state)",
@@ -593,7 +599,7 @@ def _legendre(dm: DiscreteModel, r: int) -> list[Kernel]:
     base, velocity = dm.groupoid.state_symbols()
     symbols = (*base, *velocity)
     momentum = sp.Matrix([sp.diff(L, v) for v in velocity])
-    return [Kernel("legendre", symbols, (("momentum", momentum),),
+    return [Kernel(KernelName.LEGENDRE, symbols, (("momentum", momentum),),
                    "∂L/∂v at a state (base coordinates, velocity)", along=False)]
 
 
@@ -707,7 +713,7 @@ def derive(dm: DiscreteModel, cache: DerivationCache = PROCESS_CACHE) -> Derived
 
 def _step_kernel(dm: DiscreteModel, kernels: Sequence[Kernel]) -> Kernel:
     """The kernel of the step map's residual, by name (its place in the list is not fixed)."""
-    step = next((k for k in kernels if k.name == "step"), None)
+    step = next((k for k in kernels if k.name == KernelName.STEP.value), None)
     if step is None:
         raise ModelError(f"model {dm.name!r}: no 'step' kernel was derived (kernels: "
                          f"{[k.name for k in kernels]}), so its step map cannot be checked "
@@ -735,7 +741,7 @@ def _derive(dm: DiscreteModel) -> DerivedModel:
                         boundary_names=dm.boundary_names,
                         step_scaled=tuple(g.step_scaled()),
                         symmetries=tuple(z.name for z in dm.symmetries)
-                        if any(k.name == "noether" for k in kernels) else (),
+                        if any(k.name == KernelName.NOETHER.value for k in kernels) else (),
                         gauges=tuple(name for name, _ in dm.gauges), c_context=g.c_context(),
                         fibre_sources=fibre_sources(dm),
                         coefficients=tuple(sorted(coefficients, key=lambda c: c.__name__)))

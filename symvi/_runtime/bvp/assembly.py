@@ -40,7 +40,7 @@ class Problem:
         #: Whether the last step was a full, unshifted Newton step from an iterate whose
         #: Hessian was positive definite (:func:`.globalisation.descent_step`).
         self.convex = False
-        #: The residual's rounding level at the last iteration (bvp._rounding_level).
+        #: The residual's rounding level at the last iteration (:func:`.newton.rounding_level`).
         self.level = None
         self._band = self._work = None   # reused: fresh pages are slow to touch at large N
         #: (shift key, pivots) of the LU in the work band, kept until the next assembly:

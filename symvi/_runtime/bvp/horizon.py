@@ -44,8 +44,9 @@ def slope(model, result: BVPResult, p) -> float:
 
 def free_horizon(solve, model, p, N: int, h: float, options: SolveOptions) -> BVPResult:
     """Minimise J* + ρT over T from T = N·h under the solve's ``options``. ``solve(h,
-    guess)`` is the fixed-horizon whole-trajectory solve (:func:`.bvp.fixed_horizon` at
-    everything else the solve's, guess: a previous result or None)."""
+    guess)`` is the fixed-horizon whole-trajectory solve at step h from ``guess`` (a
+    previous result, or None for the solve's own guess), everything else as the solve
+    was asked (:func:`.bvp.fixed_horizon`)."""
     xtol = options.xtol
     T, result = N * h, solve(h, None)
     if not result.success:

@@ -14,8 +14,9 @@ from ..core import arguments
 from ..core.memory import require
 from ..core.options import SolveOptions
 from ..core.storage import check_path_memory
-from ..step.batch_arguments import (Overrides, _each, _parameter_vectors, _positive,
-                                    batch_items, parameter_batch, per_member, worker_count)
+from ..step.batch_arguments import (Overrides, batch_items, each_member, member_parameters,
+                                    parameter_batch, per_member, positive_per_member,
+                                    worker_count)
 from . import boundary_states
 from .bvp import solve_steps
 
@@ -77,7 +78,7 @@ def solves(model, starts, ends, n_steps: int, h, params: Mapping | None, *, T,
                  "solve the batch in parts (keeping only what each needs) or with fewer "
                  "steps")
     _steps_or_horizons(h, T, steps, horizons, N)
-    _parameter_vectors(model, overrides, B, SOLVES)
+    member_parameters(model, overrides, B, SOLVES)
     return Solves(start_of, end_of, B, N, steps, horizons, overrides, guesses, workers,
                   options)
 
@@ -104,7 +105,7 @@ def points(model, start, end, n_steps: int, h, path: Mapping | None, *, T,
     fixed = dict(params or {})
     overrides = [fixed | {name: values[k] for name, values in columns.items()}
                  for k in range(K)]
-    _each(SOLVES, K, lambda k: model.params(overrides[k]))
+    each_member(SOLVES, K, lambda k: model.params(overrides[k]))
     return Points(overrides, K, N, options)
 
 
@@ -136,9 +137,11 @@ def _steps_or_horizons(h, T, steps: np.ndarray | None, horizons: np.ndarray | No
     if (h is None) == (T is None):       # neither or both: one message for the batch
         arguments.step_of(h, T, N)
     if T is None:
-        _positive(steps, np.ndim(h) == 0, SOLVES, lambda v: arguments.step_of(v, None, N))
+        positive_per_member(steps, np.ndim(h) == 0, SOLVES,
+                            lambda v: arguments.step_of(v, None, N))
     else:
-        _positive(horizons, np.ndim(T) == 0, SOLVES, lambda v: arguments.step_of(None, v, N))
+        positive_per_member(horizons, np.ndim(T) == 0, SOLVES,
+                            lambda v: arguments.step_of(None, v, N))
 
 
 def _same_batch(ends, B: int) -> Callable[[int], object]:

@@ -24,6 +24,10 @@ def _is_real(value) -> bool:
     return isinstance(value, numbers.Real) and not isinstance(value, (bool, np.bool_))
 
 
+#: Element types accepted without the per-element check (the common case, checked at C speed).
+_PLAIN_REALS = frozenset({float, int, np.float64, np.float32, np.int64, np.int32})
+
+
 def flag(value, what: str) -> bool:
     """``value``, which must be True or False (a TypeError naming ``what`` otherwise)."""
     if not isinstance(value, bool):
@@ -43,7 +47,8 @@ def real_array(value, what: str) -> np.ndarray:
             raise ValueError(f"{what} must be an array of numbers: {exc}") from None
     if arr.dtype == object:
         flat = arr.reshape(-1)
-        bad = [v for v in flat if not _is_real(v)][:1]
+        bad = [] if _PLAIN_REALS.issuperset(map(type, flat)) else \
+            [v for v in flat if not _is_real(v)][:1]
         if bad:
             raise ValueError(f"{what} must be an array of real numbers, got an element "
                              f"{bad[0]!r} of type {type(bad[0]).__name__}")

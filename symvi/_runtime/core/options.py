@@ -16,7 +16,7 @@ import difflib
 import functools
 import math
 from dataclasses import MISSING, dataclass, field, fields, is_dataclass, replace
-from typing import Callable, Mapping
+from typing import Callable, ClassVar, Mapping
 
 from . import arguments
 
@@ -66,6 +66,9 @@ class Options:
     (``SolveOptions(xtoll=1e-9)``, ``options.replace(xtoll=1e-9)`` and
     ``dataclasses.replace`` alike), each field checked once in ``__post_init__``."""
 
+    #: The default options (set below each class; a call naming no option shares them).
+    DEFAULT: ClassVar[Options]
+
     def __post_init__(self) -> None:
         for f in fields(self):
             object.__setattr__(self, f.name, f.metadata["check"](getattr(self, f.name), f.name))
@@ -106,7 +109,7 @@ class Options:
         keywords = {k: v for k, v in (keywords or {}).items() if not isinstance(v, Unset)}
         cls.refuse_unknown(keywords, call, note)
         if options is None:
-            return cls(**keywords)
+            return cls(**keywords) if keywords else cls.DEFAULT
         if isinstance(options, cls) and not keywords:
             return options
         given = _fields_of(options, cls, call)
@@ -220,6 +223,16 @@ class SolveOptions(Options):
         "retries halfway back to the last solved horizon when a trial horizon's solve "
         "fails"), lambda value, what: arguments.count(value, what, 0, arguments.INT_MAX))
 
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        # the certificate's test (the violation stopped falling as ρ grew) holds only
+        # where ρ goes on growing from the penalty stages
+        if self.certifying_stages[0] <= self.penalty_stages[-1]:
+            raise ValueError(
+                f"certifying_stages must continue penalty_stages: its first penalty "
+                f"{self.certifying_stages[0]:g} is not above their last "
+                f"{self.penalty_stages[-1]:g}")
+
 
 @_refusing_unknown
 @dataclass(frozen=True, kw_only=True)
@@ -238,3 +251,8 @@ class StepOptions(Options):
                          arguments.tolerance)
     ftol: float = option(0.0, "a step converges also when ‖R‖∞ ≤ ftol",
                          arguments.tolerance)
+
+
+# The defaults, checked once: a call that names no option shares them (they are frozen).
+SolveOptions.DEFAULT = SolveOptions()
+StepOptions.DEFAULT = StepOptions()

@@ -91,8 +91,8 @@ def trajectories(model, initial, n_steps: int, h, params: Mapping | None, *,
                              | dict(keywords or {}), "integrate_many")
     quantities = arguments.flag(quantities, "quantities")
     _paths_fit(model, B, n_steps, keep, quantities)
-    _positive(steps, np.ndim(h) == 0, TRAJECTORIES, arguments.step_size)
-    parameters = _parameter_vectors(model, overrides, B, TRAJECTORIES)
+    positive_per_member(steps, np.ndim(h) == 0, TRAJECTORIES, arguments.step_size)
+    parameters = member_parameters(model, overrides, B, TRAJECTORIES)
     return Trajectories(item, B, isinstance(initial, State), steps, overrides, parameters,
                         n_steps, keep, workers, options, quantities)
 
@@ -181,8 +181,8 @@ def _paths_fit(model, B: int, n_steps: int, keep: int, quantities: bool) -> None
             "store every k-th node (keep_every=k) or only the final one (final_only=True)")
 
 
-def _positive(values: np.ndarray | None, uniform: bool, kind: tuple[str, str],
-              check: Callable[[float], float]) -> None:
+def positive_per_member(values: np.ndarray | None, uniform: bool, kind: tuple[str, str],
+                        check: Callable[[float], float]) -> None:
     """Every member's step (or horizon) positive and finite: where one is not, ``check``
     (the single call's) refuses it — naming the member unless one value was given for
     all."""
@@ -195,17 +195,17 @@ def _positive(values: np.ndarray | None, uniform: bool, kind: tuple[str, str],
         _named(kind, int(bad[0]), check, float(values[bad[0]]))
 
 
-def _parameter_vectors(model, overrides: Overrides, B: int,
+def member_parameters(model, overrides: Overrides, B: int,
                        kind: tuple[str, str]) -> np.ndarray:
     """(B, P) the members' parameter vectors; one check when the overrides are the same
     for all (its message then names no member)."""
     if overrides.uniform:
         vector = model.params(overrides(0))
         return np.broadcast_to(vector, (B, vector.size))
-    return np.stack(_each(kind, B, lambda b: model.params(overrides(b))))
+    return np.stack(each_member(kind, B, lambda b: model.params(overrides(b))))
 
 
-def _each(kind: tuple[str, str], count: int, check: Callable[[int], object]) -> list:
+def each_member(kind: tuple[str, str], count: int, check: Callable[[int], object]) -> list:
     """``check(b)`` of every member b < count, naming the member where one fails."""
     return [_named(kind, b, check, b) for b in range(count)]
 
