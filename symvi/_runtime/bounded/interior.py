@@ -33,7 +33,7 @@ import sys
 import numpy as np
 
 from ..bvp.band import cholesky_pivot
-from .barrier import Inequalities, next_barrier
+from .barrier import BOUND_TOLERANCE, Inequalities, next_barrier
 from .interior_steps import step
 from ..core.model_info import Kernel
 from ..bvp.optimality import Curvature, second_order
@@ -232,7 +232,9 @@ class InteriorPoint:
             self.corrections.append(max(error, correction))
             if max(error, correction) < self.best[0]:
                 self.best = (max(error, correction), path, self.s.copy())
-            if max(error, correction) <= tolerance:
+            # and every bound holding at path, whatever xtol (barrier.BOUND_TOLERANCE):
+            # where one does not, the iteration goes on, its steps cutting c + s
+            if max(error, correction) <= tolerance and self.bounds_hold():
                 floor = self.rounding_floor(path, kkt)
                 if max(error, correction) + floor <= tolerance:
                     return path, Status.SUCCESS, (
@@ -280,6 +282,12 @@ class InteriorPoint:
                 f"the interior-point line search stalled at iteration {it} (barrier "
                 f"parameter {self.mu:.1e}, {self._last_errors()})")
         return moved, None, ""
+
+    def bounds_hold(self, among: np.ndarray | None = None) -> bool:
+        """Whether every inequality (of the rows ``among``, default all) holds at the
+        path last evaluated, to :data:`.barrier.BOUND_TOLERANCE` of its scale: the
+        condition of every SUCCESS."""
+        return self.inequalities.violation(among=among)[0] <= BOUND_TOLERANCE
 
     def rounding_floor(self, path: Path, kkt: np.ndarray) -> float:
         """The largest ‖·‖∞ of the change in the μ = 0 KKT correction ``kkt``
@@ -418,12 +426,29 @@ class InteriorPoint:
             shift = max(10 * shift, 1e-8)
         return np.inf
 
+    def _bounds_verified(self, path: Path, message: str) -> tuple[Status, str]:
+        """(status, message) of a SUCCESS, checked once more at the returned ``path``:
+        every inequality within :data:`.barrier.BOUND_TOLERANCE` of its scale, else
+        ILL_CONDITIONED with the violation (the phases accept no such path; this is the
+        last line against a false SUCCESS)."""
+        finite = self.inequalities.evaluate(path, self.problem.p, self.problem.h)
+        if finite and self.bounds_hold():
+            return Status.SUCCESS, message
+        where = self.inequalities.describe_violation(self.problem.h) if finite else \
+            "an inequality is not finite"
+        return Status.ILL_CONDITIONED, (
+            f"converged within the tolerance{message}, but at the path returned {where}, "
+            f"more than {BOUND_TOLERANCE:.0e} of its scale: not accepted. Ask a smaller "
+            f"xtol")
+
     def result(self, path: Path, iterations: int, status: Status, message: str) -> BVPResult:
         """The :class:`BVPResult` of the solve, with the bound multipliers, the active
         set and the iteration history."""
         model, problem = self.model, self.problem
         h, p, s_count = problem.h, problem.p, self.s_count
         N = path.x.shape[0] - 1
+        if status == Status.SUCCESS:
+            status, message = self._bounds_verified(path, message)
         z = np.array(self.z(path))
         return BVPResult(
             t=h * np.arange(N + 1), iterations=iterations,

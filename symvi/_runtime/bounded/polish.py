@@ -37,6 +37,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..core.paths import Path
+from .barrier import BOUND_TOLERANCE
 
 # The most Newton steps per active set and the most active sets tried are the solve's
 # options (``polish_steps``, ``polish_rounds``: :class:`.options.SolveOptions`, read from
@@ -76,11 +77,12 @@ def polish(ip, path: Path, tolerance: float, active: np.ndarray | None = None):
         z, c = ip.z(path), ineq.values
         leaving = active & (z < 0.0)
         # a dropped row violated by c lies about c/‖∇c‖ from the nodes that meet it: it
-        # may stay dropped while that is within the tolerance, and c too (a disc of
-        # radius 0.01, ‖∇c‖ ≈ 0.02, once stayed dropped at c = 3e-9 < tolerance, its
-        # node 60 tolerances from the optimum, where its multiplier is 4.5e-5)
+        # joins where that exceeds the tolerance, or c the bounds' own (a disc of radius
+        # 0.01, ‖∇c‖ ≈ 0.02, once stayed dropped at c = 3e-9 < tolerance, its node 60
+        # tolerances from the optimum, where its multiplier is 4.5e-5)
         norms = np.sqrt(ip.squared_gradients())
-        joining = ~active & (c > tolerance * np.minimum(1.0, norms))
+        joining = ~active & ((c > tolerance * np.minimum(1.0, norms))
+                             | (ineq.relative() > BOUND_TOLERANCE))
         if not (leaving.any() or joining.any()):
             return _accepted(ip, path, active, tolerance, total, correction, floor)
         extreme = np.where(active, z, np.inf) if leaving.any() else np.where(active, -np.inf, -c)
@@ -110,7 +112,9 @@ def _newton(ip, path: Path, active: np.ndarray, tolerance: float):
         # two in a row: where rounding dominates, the corrections wander rather than
         # fall, and one of them within the tolerance is luck (the cart-pole at N = 700:
         # corrections between 1.4e-7 and 9.3e-7 about a tolerance of 1.6e-7)
-        if within and correction <= tolerance:
+        # the active rows hold at path too (barrier.BOUND_TOLERANCE), whatever the
+        # tolerance; a dropped one that does not joins in polish()
+        if within and correction <= tolerance and ip.bounds_hold(active):
             floor = _floor(ip, path, active, delta, dz, solve)
             if correction + floor <= tolerance:
                 return path, step, correction, floor
