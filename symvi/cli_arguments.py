@@ -29,7 +29,7 @@ SOLVERS = (StepOptions, SolveOptions)
 #: What the help calls each.
 SOLVER_NAMES = {StepOptions: "for the step map", SolveOptions: "for the whole-trajectory solve"}
 #: The field types a flag can give (sequences are for the Python calls).
-FLAG_TYPES = {"int": int, "float": float, "bool": bool}
+FLAG_TYPES = {"int": int, "float": float, "bool": bool, "str": str}
 
 
 def option_fields() -> dict[str, tuple[Field, tuple[type, ...]]]:

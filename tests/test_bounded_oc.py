@@ -334,3 +334,36 @@ def test_bad_bounds_and_inequalities_are_model_errors(declared, pattern):
     with pytest.raises(ModelError, match=pattern):
         optimal_control("bad", G, (Omega.T * Omega)[0] / 2, sum(v**2 for v in u) / 2, u,
                         parameters={t: 1.0}, **declared(u, t, G.xi))
+
+
+def test_every_start_and_line_search_ends_at_the_same_minimum(slew, capsys):
+    """The interior point's start (``interior_start``: the guess, or the optimum without
+    bounds) and line search (``line_search``: the filter, or Armijo on the ℓ1 merit)
+    reach the phases that read them — the message names the start — and each of the four
+    ends at the same minimum (cost to 1e-9). With ``verbose`` each interior-point
+    iteration prints one line under an IPOPT-like header, and ``history`` keeps the same
+    columns, one entry per iteration: μ, the cost, the infeasibilities, complementarity,
+    the KKT correction, the step, the inertia correction's shift and the line search's
+    trials."""
+    prob = BoundedSlew(100, 11.0)
+    costs = {}
+    for start in ("guess", "unbounded"):
+        for search in ("filter", "merit"):
+            r = slew.solve_bvp(*prob.boundary, 100, prob.h, interior_start=start,
+                               line_search=search, verbose=True)
+            assert r.success, (start, search, r.message)
+            assert ("from the guess" in r.message) == (start == "guess"), r.message
+            assert ("without bounds" in r.message) == (start == "unbounded"), r.message
+            costs[start, search] = r.cost
+            printed = capsys.readouterr().err.splitlines()
+            rows = [line for line in printed if line[:5].strip().isdigit()]
+            h = r.history
+            assert sorted(h) == sorted(("mu", "objective", "primal", "dual", "complementarity",
+                                        "correction", "alpha", "shift", "trials"))
+            count = len(h["mu"])
+            assert count and all(len(v) == count for v in h.values())
+            assert len(rows) >= count and any(" iter   objective" in line for line in printed)
+            assert ((0 <= h["alpha"]) & (h["alpha"] <= 1)).all() and (h["shift"] >= 0).all()
+            assert (h["trials"] >= 0).all() and (h["mu"] > 0).all()
+            assert np.isfinite(h["objective"]).all()
+    np.testing.assert_allclose(list(costs.values()), costs["guess", "filter"], rtol=1e-9)

@@ -90,7 +90,7 @@ def test_a_saddle_is_never_a_success(compiled, monkeypatch):
     guess = battery.guesses(mod, name, N)["perturbed 12"]
     with monkeypatch.context() as patch:
         patch.setattr(battery.runtime(mod, "bvp.globalisation"), "convexifying_shift",
-                      lambda definite, start: start)
+                      lambda definite, start, first=0.0: start)
         saddle = mod.solve_bvp(ex.start, ex.end, N, ex.h * ex.n_steps / N, guess=guess,
                                maxiter=2000)
     assert saddle.status == mod.Status.SADDLE, saddle.message

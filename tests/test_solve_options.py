@@ -100,17 +100,17 @@ def test_an_interior_point_option_reaches_the_interior_point(slew, monkeypatch):
     seen = []
 
     class Spy(bounded.InteriorPoint):
-        def __init__(self, problem, path, options):
-            super().__init__(problem, path, options)
+        def __init__(self, problem, path, options, near=False):
+            super().__init__(problem, path, options, near)
             seen.append((options, self.mu))
     monkeypatch.setattr(bounded, "InteriorPoint", Spy)
     default = module.solve_bvp(start, end, N, 1.0 / N)
-    assert seen and all(o.mu_start == 0.1 and mu == 0.1 for o, mu in seen)
+    assert seen and all(o.mu_start == 10.0 and mu == 10.0 for o, mu in seen)
     seen.clear()
     changed = module.solve_bvp(start, end, N, 1.0 / N, mu_start=1e-3)
     assert seen and all(o.mu_start == 1e-3 and mu == 1e-3 for o, mu in seen)
     assert default.success and changed.success
-    assert changed.history["mu"][0] == 1e-3 and default.history["mu"][0] == 0.1
+    assert changed.history["mu"][0] == 1e-3 and default.history["mu"][0] == 10.0
     assert changed.iterations != default.iterations
 
 

@@ -1,13 +1,14 @@
-"""The phases of a bounded whole-trajectory solve (issue 21): which start the
+"""The phases of a bounded whole-trajectory solve (issues 21 and 50): which start the
 interior point gets, and what follows when it fails.
 
-A cold start solves the problem without its inequalities first and starts the interior
-point (:mod:`.interior`) from that optimum (or that solve's last iterate); where the
-interior point stalls or runs out of iterations, the penalty stages (:mod:`.penalty`)
-move the start toward the bounds and it starts again; where that fails the same way,
-the stages continue to a certificate of local infeasibility. A warm start (a previous
-result) goes to the active-set Newton (:mod:`.polish`) first, from the previous active
-set. Each phase's verdict is the interior point's SUCCESS rule.
+The interior point (:mod:`.interior`) starts from the guess. Where it stalls or runs
+out of iterations, a cold start solves the problem without its inequalities and starts
+the interior point again from that optimum (or that solve's last iterate); where that
+fails the same way, the penalty stages (:mod:`.penalty`) move the start toward the
+bounds and it starts again; where that fails too, the stages continue to a certificate
+of local infeasibility. A warm start (a previous result) goes to the active-set Newton
+(:mod:`.polish`) first, from the previous active set. Each phase's verdict is the
+interior point's SUCCESS rule.
 """
 from __future__ import annotations
 
@@ -15,6 +16,7 @@ import numpy as np
 
 from .interior import InteriorPoint
 from ..bvp.newton import newton
+from ..bvp.optimality import NEAR_FIRST_SHIFT
 from ..core.options import SolveOptions
 from ..core.paths import Path
 from .penalty import infeasibility, nearly_feasible
@@ -22,6 +24,12 @@ from ..core.results import BVPResult, Status
 
 #: The failures after which the interior point starts again (and then tests infeasibility).
 FAILED = (Status.STALLED, Status.MAX_ITERATIONS)
+#: The largest first barrier parameter of an interior point from the optimum without
+#: bounds or a start moved toward them: a start near a solution, which a larger μ pushes
+#: out of its basin (the cart-pole swing-up from its upper minimum itself, at μ = 10,
+#: went to the lower one); on the planar flyer's penalised start μ = 10 took 248
+#: iterations at N = 100, μ = 0.1 took 67.
+NEAR_MU = 0.1
 
 
 def bounded(problem, path: Path, options: SolveOptions, cold: bool,
@@ -30,21 +38,17 @@ def bounded(problem, path: Path, options: SolveOptions, cold: bool,
     under the solve's ``options``: its result, SUCCESS only at a verified minimum within
     the tolerance (module docstring).
 
-    A ``cold`` start first solves the problem without inequalities from the guess
-    (:func:`unbounded`); the interior-point iteration starts from that optimum
-    (or that solve's last iterate) where it exists, from the guess otherwise, and the
-    result counts every solve's iterations. The equality
-    solver's globalisation is the better tested of the two far from a solution: from
-    perturbed guesses whose torques exceed the bounds 400-fold, the interior-point steps
-    were cut to α ≈ 10⁻² by the fraction-to-the-boundary rule and stalled; from the
-    unbounded optimum it needs 20–30 iterations. Where the interior point then stalls or
-    runs out of iterations, :func:`.penalty.nearly_feasible` moves that optimum toward
-    the bounds by a quadratic penalty and the interior point starts again from there — a
-    retry, not the first choice: on the cart-pole swing-up the penalised start is the
-    worse one (MAX_ITERATIONS at N = 60, against SUCCESS in 33 iterations from the
-    optimum). Where that fails the same way, :func:`.penalty.infeasibility` continues the
-    penalty stages: a certificate (:class:`.penalty.Infeasibility`) makes the result
-    INFEASIBLE. ``ftol`` is not used by any of them.
+    The interior point starts from the guess (issue 50): with the filter line search,
+    the barrier problems judged by their residuals and the active set handed to the
+    active-set Newton once identified, the cart-pole swing-up from its default guess
+    takes 49–53 iterations at N = 100 and 1000 (from the optimum without bounds, as
+    before, 21 and 336) and ends at the lower of its two minima, the one IPOPT finds from
+    the same start (20.41 at N = 1000, against 32.29). Where it stalls or runs out of
+    iterations, a ``cold`` start goes on from the optimum without bounds
+    (:func:`_from_the_unbounded_optimum`): the planar flyer's straight-line guess
+    crosses its keep-out disc, a concave constraint whose curvature the barrier's
+    multipliers turn into the Hessian's, and no inertia correction up to 10³ gives a
+    step there. The result counts every phase's iterations. ``ftol`` is not used.
 
     ``active``: a warm start's active set (the previous result's, its multipliers in
     ``path``): the active-set Newton (:mod:`.polish`) is tried first from there, and the
@@ -56,29 +60,52 @@ def bounded(problem, path: Path, options: SolveOptions, cold: bool,
         warm = _warm(problem, path, active, options)
         if warm is not None:
             return warm
-    optimum, first, converged = unbounded(problem, path, options) if cold else \
-        (None, 0, False)
+    if cold and options.interior_start == "unbounded":
+        return _from_the_unbounded_optimum(problem, path, options)
+    # a previous result (without its active set) is a start near a solution
+    ip, end, iterations, status, message = _interior(problem, path, options, near=not cold)
+    if status in FAILED and cold:
+        return _from_the_unbounded_optimum(problem, path, options, iterations, ip.failure)
+    if status == Status.SUCCESS:
+        message = f"interior point from the guess: {iterations} iterations{message}"
+    return ip.result(end, iterations, status, message)
+
+
+def _from_the_unbounded_optimum(problem, path: Path, options: SolveOptions, spent: int = 0,
+                                failure: str | None = None) -> BVPResult:
+    """The solve from the optimum without bounds (``options.interior_start``), or after
+    the interior point from the guess failed (``spent`` iterations, ``failure`` its
+    message): the problem without its inequalities solved from the guess
+    (:func:`unbounded`), the interior point from that optimum (or that solve's last
+    iterate); where it stalls or runs out of iterations,
+    :func:`.penalty.nearly_feasible` moves that optimum toward the bounds by a quadratic
+    penalty and the interior point starts again from there; where that fails the same
+    way, :func:`.penalty.infeasibility` continues the penalty stages: a certificate
+    (:class:`.penalty.Infeasibility`) makes the result INFEASIBLE."""
+    options = options.replace(mu_start=min(options.mu_start, NEAR_MU))
+    problem.first_shift = NEAR_FIRST_SHIFT      # issue 21's route, as it was tuned
+    optimum, first, converged = unbounded(problem, path, options)
     without = "the optimum without bounds" if converged else \
         "the last iterate without bounds"
-    phase = f"from {without} ({first} Newton iterations), " if optimum is not None else ""
-    # a copy: the interior point sets the bound multipliers of the path it starts from
+    before = "" if failure is None else \
+        f"after the interior point from the guess failed ({spent} iterations: {failure}), "
+    phase = before + (f"from {without} ({first} Newton iterations), "
+                      if optimum is not None else "")
     ip, end, iterations, status, message = _interior(
-        problem, optimum.copy() if optimum is not None else path, options)
-    total = first + iterations
+        problem, optimum if optimum is not None else path, options, near=True)
+    total = spent + first + iterations
     if status in FAILED and optimum is not None:
         start, more, stages = nearly_feasible(problem, optimum, options)
         total += more
         if stages:
-            retry = _interior(problem, start, options)
+            retry = _interior(problem, start, options, near=True)
             total += retry[2]
             # kept unless it failed the same way: a SUCCESS, or an ILL_CONDITIONED
             # that states the accuracy reached, says more than the first stall
             if retry[3] not in FAILED:
                 ip, end, iterations, status, message = retry
-                before = total - iterations
-                phase = (f"after an interior point from {without} failed, from "
-                         f"there moved toward the bounds by "
-                         f"{stages} penalty stage{'s' if stages > 1 else ''} ({before} "
+                phase = (f"{before}from {without}, moved toward the bounds by {stages} "
+                         f"penalty stage{'s' if stages > 1 else ''} ({total - iterations} "
                          f"iterations before), ")
         if status in FAILED and stages == len(options.penalty_stages):
             certificate, more = infeasibility(problem, start, options)
@@ -122,12 +149,14 @@ def _warm(problem, path: Path, active: np.ndarray, options: SolveOptions) -> BVP
                      f"warm start from the previous active set{message}")
 
 
-def _interior(problem, path: Path, options: SolveOptions):
+def _interior(problem, path: Path, options: SolveOptions, near: bool = False):
     """(InteriorPoint, path, iterations, status, message) of the interior-point
-    iteration from ``path``, the minimum test applied to a converged one."""
+    iteration from ``path``, the minimum test applied to a converged one; ``near``: a
+    start near a solution (:class:`.interior.InteriorPoint`)."""
     problem.shift, problem.penalty, problem.convex = 0.0, 0.0, False
-    ip = InteriorPoint(problem, path, options)
+    path = path.copy()      # the interior point sets the bound multipliers of its start
+    ip = InteriorPoint(problem, path, options, near)
     path, iterations, status, message = ip.solve(path)
     if status == Status.SUCCESS and ip.verified is not path:   # the active-set Newton's is
         status, message = ip.minimum(path, message)
-    return ip, path, iterations, status, message
+    return ip, path, iterations + ip.active_set_steps, status, message

@@ -16,6 +16,7 @@ import numpy as np
 
 from .barrier import TAU_MIN, boundary_step, safeguarded
 from ..bvp.globalisation import curvature
+from ..bvp.optimality import MAX_SHIFT, next_shift
 from ..core.paths import Path
 
 #: Relative size of a correction below which a full step whose merit decrease is rounding
@@ -56,12 +57,12 @@ def step(ip, path: Path, res, ab, bw: int, delta, ds, dz, Gd, error: float):
     c, nodes = ip.inequalities.values.copy(), ip.nodes
     scale = ip.scale
     shift = ip.inertia_shift(path, bw, problem.shift)
-    while shift <= 1e3:
+    while shift <= MAX_SHIFT:
         if shift > 0.0:
             try:
                 delta = problem.solve(ab, bw, -res, shift * scale, nodes)
             except LinAlgError:
-                shift = max(10 * shift, 1e-8)
+                shift = next_shift(shift, ip.first_shift)
                 continue
             ds, dz, Gd = ip.steps(delta, path, mu, c)
         moved = _backtrack(ip, path, ab, bw, delta, ds, dz, Gd, c, shift * scale,
@@ -71,9 +72,10 @@ def step(ip, path: Path, res, ab, bw: int, delta, ds, dz, Gd, error: float):
                 if error <= NEAR * (1.0 + problem.size(path)) \
                 else _residual_search(ip, path, delta, ds, dz, c)
         if moved is not None:
-            problem.shift = shift / 10 if shift > 1e-10 else 0.0
+            ip.log.step(shift=shift)
+            problem.shift = shift / 10 if shift > ip.first_shift else 0.0
             return moved
-        shift = max(10 * shift, 1e-8)
+        shift = next_shift(shift, ip.first_shift)
     return None
 
 
@@ -102,10 +104,11 @@ def _backtrack(ip, path: Path, ab, bw: int, delta, ds, dz, Gd, c, shift: float,
     tau = max(TAU_MIN, 1.0 - ip.mu)
     alpha = boundary_step(s, ds, tau)
     while alpha >= min_alpha:
+        ip.log.trial()
         trial = problem.moved(path, delta, alpha)
         slacks = None if trial is None else reset(ip, trial, s, s + alpha * ds, tau)
         if slacks is not None and merit(ip, trial, slacks, nu) <= base + 1e-4 * alpha * descent:
-            return _accept(ip, trial, slacks, z, dz, boundary_step(z, dz, tau), alpha)
+            return accept(ip, trial, slacks, z, dz, boundary_step(z, dz, tau), alpha)
         alpha /= 2
     return None
 
@@ -153,12 +156,13 @@ def _residual_search(ip, path: Path, delta, ds, dz, c):
     base = _kkt_norm(ip, path, ip.s, c)
     alpha, alpha_z = boundary_step(ip.s, ds, tau), boundary_step(z, dz, tau)
     while alpha >= 2.0**-12:
+        ip.log.trial()
         trial = ip.problem.moved(path, delta, alpha)
         if trial is not None:
             s = ip.s + alpha * ds
             trial.lam[:, ip.s_count:] = z + min(alpha, alpha_z) * dz
             if _kkt_norm(ip, trial, s) <= np.sqrt(1 - 1e-4 * alpha) * base:
-                return _accept(ip, trial, s, z, dz, min(alpha, alpha_z), alpha)
+                return accept(ip, trial, s, z, dz, min(alpha, alpha_z), alpha)
         alpha /= 2
     return None
 
@@ -184,12 +188,14 @@ def _natural(ip, path: Path, ab, bw: int, delta, ds, dz, error: float):
     if not float(np.abs(simplified).max(initial=0.0)) < error:
         return None
     ip.s = s
-    ip.history["alpha"].append(alpha)
+    ip.log.step(alpha=alpha)
     return trial
 
 
-def _accept(ip, trial: Path, s: np.ndarray, z, dz, alpha_z: float, alpha: float) -> Path:
+def accept(ip, trial: Path, s: np.ndarray, z, dz, alpha_z: float, alpha: float) -> Path:
+    """``trial`` with the slacks ``s`` and the multipliers z + α_z Δz (safeguarded) set,
+    the step α recorded."""
     ip.s = s
     trial.lam[:, ip.s_count:] = safeguarded(z + alpha_z * dz, s, ip.mu * ip.problem.h)
-    ip.history["alpha"].append(alpha)
+    ip.log.step(alpha=alpha)
     return trial

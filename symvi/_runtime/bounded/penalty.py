@@ -57,6 +57,7 @@ class PenalisedProblem(Problem):
     def __init__(self, base: Problem, inequalities: Inequalities, rho: float):
         super().__init__(base.model, base.p, base.h)
         self.inequalities, self.rho = inequalities, rho
+        self.first_shift = base.first_shift
 
     def assemble(self, path: Path, with_jacobian: bool):
         res, ab, bw, finite = super().assemble(path, with_jacobian)
@@ -161,7 +162,9 @@ def _stage(problem: Problem, inequalities: Inequalities, path: Path, rho: float,
     """(minimiser, Newton iterations, status, the stage's problem) of
     S + ρh/2 Σ max(0, c)² from ``path`` (``options.ftol`` unused)."""
     stage = PenalisedProblem(problem, inequalities, rho * problem.h)
-    moved, _, steps, status, _ = newton(stage, path.copy(), options.replace(ftol=0.0),
+    start = path.copy()
+    start.lam[:, problem.model.constraints:] = 0.0      # the penalty stands for z·c
+    moved, _, steps, status, _ = newton(stage, start, options.replace(ftol=0.0),
                                         f"penalty stage ρ = {rho:.0e} h")
     return moved, len(steps), status, stage
 

@@ -103,6 +103,7 @@ def _newton(ip, path: Path, active: np.ndarray, tolerance: float):
     path.lam[:, ip.s_count:] = np.where(active, ip.z(path), 0.0)
     within = False      # whether the last correction was within the tolerance
     for step in range(ip.options.polish_steps):
+        ip.active_set_steps += 1
         newton = _correction(ip, path, active)
         if newton is None:
             return None

@@ -13,6 +13,7 @@ import numpy as np
 from .band import factor, lu_solve, positive_definite, reciprocal_condition
 from .gauge import Gauge
 from .lifted import LIFT_FROM, LiftedSystem
+from .optimality import FIRST_SHIFT
 from ..core.model_info import Kernel
 from ..core.paths import Path
 
@@ -37,6 +38,8 @@ class Problem:
         #: :func:`.globalisation.descent_step`).
         self.minimise = bool(model.info.controls)
         self.shift, self.penalty = 0.0, 0.0
+        #: The inertia correction's first shift (:func:`.optimality.next_shift`)
+        self.first_shift = FIRST_SHIFT
         #: Whether the last step was a full, unshifted Newton step from an iterate whose
         #: Hessian was positive definite (:func:`.globalisation.descent_step`).
         self.convex = False

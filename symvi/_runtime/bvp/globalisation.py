@@ -8,7 +8,7 @@ from __future__ import annotations
 import numpy as np
 
 from .band import product
-from .optimality import convexifying_shift
+from .optimality import MAX_SHIFT, convexifying_shift, next_shift
 from ..core.paths import Path
 
 
@@ -86,13 +86,14 @@ def descent_step(problem, state, res, ab, bw, delta, contracting: bool = False,
         return state, None
     scale, shift = float(np.abs(ab[2 * bw][nodes]).max(initial=0.0)), problem.shift
     if not rows.any() and not (contracting and problem.convex):
-        shift = convexifying_shift(lambda mu: problem.definite(ab, bw, mu * scale), shift)
-    while shift <= 1e3:
+        shift = convexifying_shift(lambda mu: problem.definite(ab, bw, mu * scale), shift,
+                                   problem.first_shift)
+    while shift <= MAX_SHIFT:
         if shift > 0.0:
             try:
                 delta = problem.solve(ab, bw, -res, shift * scale, nodes)
             except LinAlgError:         # this shift makes the matrix singular: the next
-                shift = max(10 * shift, 1e-8)
+                shift = next_shift(shift, problem.first_shift)
                 continue
         descent, nu, alpha = slope(delta), problem.penalty, 1.0
         if rows.any() and curvature(problem.model, ab, bw, delta, nodes, shift * scale) <= 0.0:
@@ -101,12 +102,12 @@ def descent_step(problem, state, res, ab, bw, delta, contracting: bool = False,
             trial = problem.moved(state, delta, alpha)
             if trial is not None and penalty(problem, trial, rows, nu) \
                     <= cost + nu * infeasibility + 1e-4 * alpha * descent:
-                problem.shift = shift / 10 if alpha == 1.0 and shift > 1e-10 else \
+                problem.shift = shift / 10 if alpha == 1.0 and shift > problem.first_shift else \
                     (0.0 if alpha == 1.0 else shift)
                 problem.convex = not rows.any() and alpha == 1.0 and shift == 0.0
                 return trial, alpha * float(np.abs(delta).max(initial=0.0))
             alpha /= 2
-        shift = max(10 * shift, 1e-8)
+        shift = next_shift(shift, problem.first_shift)
     return state, None
 
 

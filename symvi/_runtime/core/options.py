@@ -46,6 +46,14 @@ def increasing(value, what: str) -> tuple[float, ...]:
     return values
 
 
+def one_of(value, what: str, choices: tuple[str, ...]) -> str:
+    """One of the strings ``choices``."""
+    if value not in choices:
+        raise ValueError(f"{what} must be one of {', '.join(map(repr, choices))}, got "
+                         f"{value!r}")
+    return value
+
+
 class Unset:
     """A call's default for an option it names in its signature (``solve_bvp(...,
     maxiter=100)``): equal to the option's default, so that ``inspect.signature`` and
@@ -190,15 +198,29 @@ class SolveOptions(Options):
         "print each iteration of the whole-trajectory Newton (its residual norm and the "
         "step taken) and of the interior point (barrier parameter, infeasibilities) on "
         "stderr"), arguments.flag)
-    mu_start: float = option(0.1, (
+    mu_start: float = option(10.0, (
         "the interior point's first barrier parameter μ (per unit time: a window's barrier "
         "term is μh log s)"), positive)
+    identify: float = option(1e-3, (
+        "the interior point hands its iterate to the active-set Newton when its node "
+        "correction is within identify·(1 + max |x|) (an active set again only from ten "
+        "times closer)"), positive)
+    interior_start: str = option("guess", (
+        "where the interior point starts: 'guess', or 'unbounded' (the optimum of the "
+        "problem without its inequalities, solved from the guess first; where the start "
+        "from the guess fails, the solve goes on from there anyway)"),
+        lambda value, what: one_of(value, what, ("guess", "unbounded")))
+    line_search: str = option("filter", (
+        "the interior point's line search: 'filter' (Wächter & Biegler's filter, the "
+        "merit's step where it finds none) or 'merit' (Armijo on the barrier problem's "
+        "ℓ1 penalty)"), lambda value, what: one_of(value, what, ("filter", "merit")))
     mu_floor: float = option(1e-3, (
         "the barrier parameter's floor, as a factor on xtol: μ falls no lower than "
         "mu_floor·xtol"), positive)
     kappa_epsilon: float = option(10.0, (
-        "the barrier problem counts as solved, and μ falls, when the node part of its "
-        "Newton correction is within kappa_epsilon·μ·(1 + size) (IPOPT's κ_ε)"), positive)
+        "the barrier problem counts as solved, and μ falls, when its residuals per unit "
+        "time are within kappa_epsilon·μ, or its Newton correction within the tolerance "
+        "(IPOPT's κ_ε)"), positive)
     stagnation: int = option(6, (
         "interior-point iterations over which the KKT correction must halve to count as "
         "still converging (else rounding limits it: ILL_CONDITIONED, or finished by the "
