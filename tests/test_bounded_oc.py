@@ -367,3 +367,31 @@ def test_every_start_and_line_search_ends_at_the_same_minimum(slew, capsys):
             assert (h["trials"] >= 0).all() and (h["mu"] > 0).all()
             assert np.isfinite(h["objective"]).all()
     np.testing.assert_allclose(list(costs.values()), costs["guess", "filter"], rtol=1e-9)
+
+
+def test_bounds_left_empty_by_the_parameters_are_refused_before_any_iteration(tmp_path):
+    """Issue 50, item 6: a bound whose sides are separate parameters, lo ≤ u ≤ hi, on a
+    double integrator. The declaration refuses lo ≥ hi at the defaults; at run time the
+    same rule holds for the values a solve is given — a ValueError naming both sides and
+    the gap, before any iteration, where the interior point used to spend a full solve
+    to report INFEASIBLE. lo < hi still solves, with the bound active (rest to rest over
+    a unit distance in T = 1 needs |u| ≥ 4; the unbounded optimum's peak is 6)."""
+    from symvi import PairGroupoid
+    from symvi.build import compile_model
+
+    G = PairGroupoid(["q"])
+    (q,), (v,) = G.q, G.qdot
+    u, lo, hi = sp.symbols("u lo hi", real=True)
+    model = optimal_control(name="interval", groupoid=G, lagrangian=v**2 / 2,
+                            cost=u**2 / 2, controls=[u], parameters={lo: -5.0, hi: 5.0},
+                            bounds={u: (lo, hi)})
+    module = compile_model(model, tmp_path)
+    assert module.model.info.intervals == ((0, 1),)
+    start, end, N = np.zeros((2, 1)), np.ones((2, 1)), 40
+    for lo_value, hi_value, gap in ((2.0, 1.0, "1"), (1.0, 1.0, "0")):
+        with pytest.raises(ValueError, match=rf"the bounds 'u <= hi' and 'u >= lo' leave an "
+                                             rf"empty interval .* exceeds the upper by {gap}"):
+            module.solve_bvp(start, end, N, 1.0 / N, params=dict(lo=lo_value, hi=hi_value))
+    r = module.solve_bvp(start, end, N, 1.0 / N, params=dict(lo=-4.5, hi=4.5))
+    assert r.success and r.active.any(), r.message
+    assert r.controls.max() <= 4.5 + 1e-9 and r.controls.min() >= -4.5 - 1e-9

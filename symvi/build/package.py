@@ -87,7 +87,7 @@ def info(dm: DerivedModel, key: str, description: str) -> ModelInfo:
         constraint_names=tuple(dm.constraint_names), unactuated=tuple(dm.unactuated),
         end_free=dm.end_free, end_conditions=tuple(dm.end_names),
         controls=dm.control_count, inequalities=tuple(dm.inequality_names),
-        boundary_inequalities=tuple(dm.boundary_names),
+        boundary_inequalities=tuple(dm.boundary_names), intervals=tuple(dm.intervals),
         free_horizon=any(k.name == Kernel.HORIZON.value for k in dm.kernels),
         step_scaled=tuple(dm.step_scaled), symmetries=tuple(dm.symmetries),
         gauges=tuple(dm.gauges),

@@ -98,6 +98,9 @@ class DerivedModel:
     inequality_names: tuple[str, ...] = ()
     #: The control-free inequalities on one element (the ``boundary`` kernel's rows).
     boundary_names: tuple[str, ...] = ()
+    #: Pairs (i, j) of inequality rows whose sum c_i + c_j depends on the parameters
+    #: alone — a bound's two sides, c_i + c_j = lower − upper (:func:`interval_pairs`).
+    intervals: tuple[tuple[int, int], ...] = ()
     #: Per fibre coordinate: an increment divided by h (a group factor's ξ).
     step_scaled: tuple[bool, ...] = ()
     #: Names of the conserved quantities F_Z of the ``noether`` kernel.
@@ -689,6 +692,17 @@ class DerivationCache:
                 self._models.popitem(last=False)
 
 
+def interval_pairs(inequalities, parameters) -> tuple[tuple[int, int], ...]:
+    """The pairs (i, j), i < j, of the window inequalities c ≤ 0 whose sum is free of
+    the path: the two sides of a bound (u − upper and lower − u sum to lower − upper),
+    which the run time checks for an empty interval once the parameters are known
+    (:func:`symvi._runtime.bounded.barrier.check_intervals`), before any iteration."""
+    allowed = set(parameters)
+    return tuple((i, j) for i in range(len(inequalities))
+                 for j in range(i + 1, len(inequalities))
+                 if sp.expand(inequalities[i] + inequalities[j]).free_symbols <= allowed)
+
+
 #: The cache :func:`derive` uses unless handed another: the one every caller in a process
 #: shares by default (the build, the checks, the test session, which enlarges it), passed
 #: as :func:`derive`'s default argument. A caller that wants derivations of its own (or
@@ -739,6 +753,7 @@ def _derive(dm: DiscreteModel) -> DerivedModel:
                         end_free=dm.end_free, end_names=dm.end_names,
                         inequality_names=dm.inequality_names,
                         boundary_names=dm.boundary_names,
+                        intervals=interval_pairs(dm.inequalities, dm.parameters),
                         step_scaled=tuple(g.step_scaled()),
                         symmetries=tuple(z.name for z in dm.symmetries)
                         if any(k.name == KernelName.NOETHER.value for k in kernels) else (),

@@ -128,6 +128,28 @@ class Inequalities:
 BOUNDARY_TOLERANCE = 1e-9
 
 
+def check_intervals(model, path: Path, p, h: float) -> None:
+    """Raise ValueError naming the bound where the parameters leave its interval empty
+    (lower ≥ upper): its two sides c_i + c_j = lower − upper, the same on every window
+    (``ModelInfo.intervals``), evaluated on the first window of ``path``. The declaration
+    refuses such bounds at the parameters' defaults; this is the same rule for the values
+    a solve is given, before any iteration (an interior point would only find them
+    INFEASIBLE after a full solve)."""
+    pairs = model.info.intervals
+    if not pairs:
+        return
+    c = Inequalities(model, path.x.shape[0])
+    c.evaluate(path, p, h)
+    names, first = model.info.inequalities, c.values[0]
+    for i, j in pairs:
+        gap = first[i] + first[j]                   # lower − upper
+        if not gap < 0.0:
+            raise ValueError(
+                f"the bounds {names[i]!r} and {names[j]!r} leave an empty interval with "
+                f"these parameters: the lower side exceeds the upper by {gap:.6g}; give "
+                f"parameters with lower < upper")
+
+
 def check_boundary_data(model, path: Path, p, h: float) -> None:
     """Raise ValueError naming the end, the element and the inequality when a fixed
     element of the boundary data (elements 0 … r−2 and N−r+1 … N−1, between fixed

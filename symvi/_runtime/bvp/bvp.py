@@ -167,8 +167,9 @@ def fixed_horizon(model, start, end, N: int, h: float, p, guess,
     if model.inequalities:
         # bvp/'s one import of bounded/, made only for a model with inequalities:
         # bounded/ builds on bvp/, and a model without bounds never loads it.
-        from ..bounded.barrier import check_boundary_data
+        from ..bounded.barrier import check_boundary_data, check_intervals
         from ..bounded.bounded import bounded
+        check_intervals(model, path, p, h)
         check_boundary_data(model, path, p, h)
         cold = not isinstance(guess, BVPResult)
         active = None if cold or guess.active is None \

@@ -21,7 +21,7 @@ from typing import Any, Mapping
 
 #: The schema version of :class:`ModelInfo`: raised whenever a field is added, removed,
 #: renamed or changes meaning, so that a package written with another schema is refused.
-VERSION = 1
+VERSION = 2
 
 
 class ModelInfoError(ValueError):
@@ -158,6 +158,9 @@ class ModelInfo:
     inequalities: tuple[str, ...]
     #: The names of those among them without controls, checked on the boundary elements.
     boundary_inequalities: tuple[str, ...]
+    #: Pairs (i, j) of those rows whose sum depends on the parameters alone: a bound's
+    #: two sides, c_i + c_j = lower − upper.
+    intervals: tuple[tuple[int, int], ...]
     #: Whether the final time is free (the ``horizon`` kernel).
     free_horizon: bool
     #: Per fibre coordinate: whether it is an increment over h (a group factor's ξ).
@@ -258,6 +261,12 @@ def _value(annotation: str, value: Any, where: str):
                                  f"recompile the model")
         item = annotation[len("tuple["):-len(", ...]")]
         return tuple(_value(item, v, f"{where}[{i}]") for i, v in enumerate(value))
+    if annotation.startswith("tuple["):         # fixed length: tuple[int, int]
+        items = annotation[len("tuple["):-1].split(", ")
+        if not isinstance(value, (list, tuple)) or len(value) != len(items):
+            raise ModelInfoError(f"{where} = {value!r} is not a {annotation}: recompile the "
+                                 f"model")
+        return tuple(_value(a, v, f"{where}[{i}]") for i, (a, v) in enumerate(zip(items, value)))
     nested = {"KernelInfo": KernelInfo, "GroupInfo": GroupInfo}[annotation]
     return _read(nested, value, where)
 
