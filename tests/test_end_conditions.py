@@ -230,3 +230,24 @@ def test_end_conditions_that_cannot_determine_the_end_are_named(build_dir):
     r = speed.solve_bvp([np.eye(3)] * 2, guess, 20, 0.05)
     assert r.success, r.message
     assert abs(r.f[-1, 0] ** 2 + r.f[-1, 1] ** 2 - 1) <= 1e-10 and abs(r.f[-1, 2]) <= 1e-10
+
+
+def test_a_failed_result_is_a_guess_of_nodes_only(models):
+    """A false success found by a hunt (issue 50), pinned: a solve warm-started from an
+    INFEASIBLE result (the catch at u_max = 3, its multipliers λ near 1e9) inherited
+    those multipliers, the tolerance xtol·(1 + size) grew with them to 1.8, and the
+    interior point's most accurate iterate, finished, was a SUCCESS with the pole
+    equation violated by |h·Φ| = 4.7e-7 and a cost 3.6e-5 above the optimum. A result
+    that failed now gives its nodes only: the solve is the cold one's, to rounding."""
+    limited, N = models["limited"], 40
+    h = T / N
+    failed = limited.solve_bvp(TILTED, None, N, h, params=dict(u_max=3.0))
+    assert failed.status.name == "INFEASIBLE", failed.message
+    warm = limited.solve_bvp(TILTED, None, N, h, params=dict(u_max=100.0), guess=failed)
+    cold = limited.solve_bvp(TILTED, None, N, h, params=dict(u_max=100.0))
+    assert warm.success and cold.success, (warm.message, cold.message)
+    prob = Caught(N, 100.0)
+    z = prob.from_symvi(warm)
+    assert np.abs(prob.h * prob.phi(z)).max() <= 1e-12
+    assert abs(warm.cost - cold.cost) <= 1e-10 * cold.cost
+    assert np.abs(warm.x - cold.x).max() <= 1e-10

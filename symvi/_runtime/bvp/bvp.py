@@ -171,7 +171,8 @@ def fixed_horizon(model, start, end, N: int, h: float, p, guess,
         from ..bounded.bounded import bounded
         check_intervals(model, path, p, h)
         check_boundary_data(model, path, p, h)
-        cold = not isinstance(guess, BVPResult)
+        # a previous result that failed is a guess of nodes only (core.paths.initial_path)
+        cold = not (isinstance(guess, BVPResult) and guess.success)
         active = None if cold or guess.active is None \
             or guess.active.shape != path.lam[:, model.constraints:].shape else guess.active
         return bounded(problem, path, options, cold, active)

@@ -36,6 +36,15 @@ def positive(value, what: str) -> float:
     return value
 
 
+def at_most(value, what: str, largest: float) -> float:
+    """A positive, finite real number no larger than ``largest`` (beyond it the
+    iteration's arithmetic overflows: μ = 1e200 raised OverflowError in the filter)."""
+    value = positive(value, what)
+    if value > largest:
+        raise ValueError(f"{what} must be at most {largest:g}, got {value:g}")
+    return value
+
+
 def increasing(value, what: str) -> tuple[float, ...]:
     """A non-empty tuple of positive, finite, strictly increasing real numbers."""
     if isinstance(value, (str, bytes)) or not hasattr(value, "__iter__"):
@@ -200,7 +209,7 @@ class SolveOptions(Options):
         "stderr"), arguments.flag)
     mu_start: float = option(10.0, (
         "the interior point's first barrier parameter μ (per unit time: a window's barrier "
-        "term is μh log s)"), positive)
+        "term is μh log s), at most 1e10"), lambda value, what: at_most(value, what, 1e10))
     identify: float = option(1e-3, (
         "the interior point hands its iterate to the active-set Newton when its node "
         "correction is within identify·(1 + max |x|) (an active set again only from ten "

@@ -166,11 +166,14 @@ def initial_path(model, start, end, N: int, guess, p, h):
     count = model.constraints + len(model.inequalities)
     windows = N + 1 - r if count else 0
     lam = np.zeros((windows, count))
-    if previous is not None:
+    # a failed result's multipliers are no start: an INFEASIBLE one's λ reach 1e9, and
+    # the tolerance, relative to the path's size, then passed corrections of 3e-4
+    solved = previous is not None and previous.success
+    if solved:
         f, lam = _kept(model, previous, x, g, f, lam, h)
     check_consistent(model, x, f, p, h, "boundary data or guess")
     nu = np.zeros(max(model.end_count, 1))
-    if previous is not None and previous.end_multipliers is not None \
+    if solved and previous.end_multipliers is not None \
             and previous.end_multipliers.shape == (model.end_count,):
         nu[:model.end_count] = previous.end_multipliers
     return Path(x, g, f, lam, nu)
