@@ -15,6 +15,8 @@ import numpy as np
 from scipy.sparse import coo_matrix
 from scipy.sparse.csgraph import connected_components
 
+from test_layout import _lines, _modules
+
 ROOT = Path(__file__).resolve().parent.parent
 SYMVI = ROOT / "symvi"
 TEXT = (ROOT / "ARCHITECTURE.md").read_text(encoding="utf-8")
@@ -94,15 +96,6 @@ def test_the_names_are_read_as_files():
 
 
 # -- no import cycle between packages ---------------------------------------------------
-def _modules() -> dict[str, Path]:
-    """Every module of the package by its dotted name (a package by its __init__)."""
-    found = {}
-    for path in SYMVI.rglob("*.py"):
-        parts = path.relative_to(ROOT).with_suffix("").parts
-        found[".".join(parts[:-1] if parts[-1] == "__init__" else parts)] = path
-    return found
-
-
 def _is_type_checking(node: ast.If) -> bool:
     test = node.test
     return (isinstance(test, ast.Name) and test.id == "TYPE_CHECKING") or \
@@ -323,22 +316,16 @@ KERNEL_BY_STRING = re.compile(r"""\b(?:along_vector|along|kernel_outputs|evaluat
                               r"""|\b_points\s*\(\s*\w+\s*,\s*["']""")
 
 
-def _source_lines(paths):
-    for path in paths:
-        for number, line in enumerate(path.read_text(encoding="utf-8").splitlines(), 1):
-            yield f"{path.relative_to(ROOT).as_posix()}:{number}: {line.strip()}", line
-
-
 def test_model_info_is_read_by_attribute():
     """No ``info[…]``/``info.get(…)``/``INFO[…]`` string lookup is left in symvi/ (the run
     time included) or the templates: what a package knows about its model is
     ``_runtime/core/model_info.py``'s frozen ``ModelInfo``, read by attribute; and the run
     time names the kernels it calls by ``Kernel``, not by strings."""
     sources = [*sorted(SYMVI.rglob("*.py")), *sorted((ROOT / "templates").glob("*.j2"))]
-    lookups = [where for where, line in _source_lines(sources) if INFO_LOOKUP.search(line)]
+    lookups = [where for where, line in _lines(sources) if INFO_LOOKUP.search(line)]
     assert not lookups, "string lookups in INFO:\n" + "\n".join(lookups)
     runtime = sorted((SYMVI / "_runtime").rglob("*.py"))
-    named = [where for where, line in _source_lines(runtime) if KERNEL_BY_STRING.search(line)]
+    named = [where for where, line in _lines(runtime) if KERNEL_BY_STRING.search(line)]
     assert not named, "kernels named by strings in the run time:\n" + "\n".join(named)
     for line in ('spec = self.info["kernels"].get(kernel)', "info['kind']", 'INFO["key"]',
                  'model.info.get("gauges", ())', 'int(info.get("controls") or 0)',

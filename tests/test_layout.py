@@ -147,18 +147,3 @@ def test_no_module_level_import_circles():
     circles = [sorted(names[i] for i in np.flatnonzero(labels == c)) for c in range(count)]
     circles = [c for c in circles if len(c) > 1]
     assert not circles, f"import circles: {circles}"
-
-
-def test_architecture_names_only_files_that_exist():
-    """Each file ARCHITECTURE.md names in its table lies in a folder of its row."""
-    text = (ROOT / "ARCHITECTURE.md").read_text()
-    missing = []
-    for row in re.findall(r"^\| `([\w/]+)/`.*$", text, flags=re.M):
-        line = next(l for l in text.splitlines() if l.startswith(f"| `{row}/`"))
-        heading = re.match(r"^\| ((?:`[\w/]+/`(?:, )?)+) \|", line).group(1)
-        folders = [ROOT / f for f in re.findall(r"`([\w/]+)/`", heading)]
-        for name in re.findall(r"`([\w.]+\.(?:py|j2))`", line):
-            if not any((folder / name).is_file() for folder in folders):
-                missing.append(f"{row}/{name}")
-    assert len(re.findall(r"^\| `", text, flags=re.M)) >= 9
-    assert not missing, f"ARCHITECTURE.md names files that do not exist: {missing}"

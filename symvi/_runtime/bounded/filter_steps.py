@@ -42,9 +42,10 @@ def filter_step(ip, path: Path, res, ab, bw: int, delta, ds, dz, Gd, error: floa
         ip.log.step(shift=shift)
         problem.shift = shift / 10 if shift > ip.first_shift else 0.0
         return moved
-    # the trials evaluated c elsewhere: the merit's step needs it at path
+    # the trials evaluated c elsewhere: the merit's step needs it at path (and the same
+    # inertia correction, not found again)
     ip.inequalities.evaluate(path, problem.p, problem.h)
-    return step(ip, path, res, ab, bw, delta, ds, dz, Gd, error)
+    return step(ip, path, res, ab, bw, delta, ds, dz, Gd, error, shift)
 
 
 def infeasibility(ip, path: Path, stencil: np.ndarray, c: np.ndarray, s: np.ndarray) -> float:

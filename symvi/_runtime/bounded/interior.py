@@ -128,7 +128,6 @@ class InteriorPoint:
         # the scale of inertia-correcting shifts: W's, not Σ's (10¹⁰ larger near the end)
         self.scale = float(np.abs(ab[2 * bw][self.nodes]).max(initial=0.0))
         self.hessian = np.array(ab, order="F")      # W, before the barrier adds GᵀΣG
-        self.level = rounding_level(self.model, ab, bw, self.problem.magnitudes(path))
         finite &= self.inequalities.add_barrier(path, p, h, self.z(path), self.s,
                                                 self.mu * h, res, ab)
         return (res, ab, bw, dual, eq) if finite else None
@@ -282,7 +281,7 @@ class InteriorPoint:
             # a smaller μ only adds rounding (Σ = z/s grows as 1/μ on active rows)
             biased = correction - error > tolerance / 2
             self.node_correction = float(np.abs(delta[self.nodes]).max(initial=0.0))
-            solved = self._barrier_solved(res, path, error, tolerance)
+            solved = self._barrier_solved(res, bw, path, error, tolerance)
             if not solved or self.mu <= self.floor or not biased:
                 break
             # the barrier problem is solved: the same matrix serves the next μ
@@ -313,7 +312,7 @@ class InteriorPoint:
                 f"parameter {self.mu:.1e}, {self._last_errors()})")
         return moved, None, ""
 
-    def _barrier_solved(self, res: np.ndarray, path: Path, error: float,
+    def _barrier_solved(self, res: np.ndarray, bw: int, path: Path, error: float,
                         tolerance: float) -> bool:
         """Whether the barrier problem counts as solved, so that μ may fall: its
         correction within the tolerance, or :meth:`barrier_error` within κ_ε μ (from a
@@ -321,9 +320,9 @@ class InteriorPoint:
         kappa = self.options.kappa_epsilon
         if self.near:
             return self.node_correction <= kappa * self.mu * (1.0 + self.problem.size(path))
-        return error <= tolerance or self.barrier_error(res, path) <= kappa * self.mu
+        return error <= tolerance or self.barrier_error(res, bw, path) <= kappa * self.mu
 
-    def barrier_error(self, res: np.ndarray, path: Path) -> float:
+    def barrier_error(self, res: np.ndarray, bw: int, path: Path) -> float:
         """E_μ of Wächter & Biegler 2006 (eq. 5) per unit time — the barrier problem's
         dual and equality residuals over h, the slacked inequalities' residual c + s, and
         the complementarity's distance s∘z/h − μ —: its barrier problem counts as solved
@@ -333,12 +332,13 @@ class InteriorPoint:
         N = 1000 went from μ = 100 to 0.032 in two iterations with a dual residual of 60,
         and crept at steps α ≈ 0.05 cut by the fraction to the boundary for 90
         iterations. The residuals are measured above their rounding level
-        (:func:`.newton.rounding_level`, at the last assembly): at N = 1000 the cart-pole's
-        barrier problem converged in its nodes with a node residual of 0.05, its rounding,
-        and μ = 0.1 never fell."""
+        (:func:`.newton.rounding_level` of W, assembled at ``path``): at N = 1000 the
+        cart-pole's barrier problem converged in its nodes with a node residual of 0.05,
+        its rounding, and μ = 0.1 never fell."""
         h = self.problem.h
         c, z = self.inequalities.values, self.z(path)
-        dual = max(0.0, float(np.abs(res).max(initial=0.0)) - self.level)
+        level = rounding_level(self.model, self.hessian, bw, self.problem.magnitudes(path))
+        dual = max(0.0, float(np.abs(res).max(initial=0.0)) - level)
         return max(dual / h,
                    float(np.abs(c + self.s).max(initial=0.0)),
                    float(np.abs(self.s * z / h - self.mu).max(initial=0.0)))

@@ -43,20 +43,23 @@ def merit(ip, path: Path, s: np.ndarray, nu: float) -> float:
     return value
 
 
-def step(ip, path: Path, res, ab, bw: int, delta, ds, dz, Gd, error: float):
+def step(ip, path: Path, res, ab, bw: int, delta, ds, dz, Gd, error: float,
+         shift: float | None = None):
     """A step along the reduced correction (shifted by the inertia correction
     :meth:`.interior.InteriorPoint.inertia_shift`, and further where it is no descent or
     meets negative curvature, as in :func:`.globalisation.descent_step`), cut by the
     fraction-to-the-boundary rule and Armijo backtracking on :func:`merit`; near
     the solution, where the merit's rounding hides the step's decrease, the full
     step by Deuflhard's natural monotonicity test (:func:`_natural`). The moved
-    path, or None."""
+    path, or None. ``shift``: the inertia correction at ``path``, where the caller has
+    found it (:func:`.filter_steps.filter_step`)."""
     from scipy.linalg import LinAlgError
 
     problem, mu = ip.problem, ip.mu * ip.problem.h
     c, nodes = ip.inequalities.values.copy(), ip.nodes
     scale = ip.scale
-    shift = ip.inertia_shift(path, bw, problem.shift)
+    if shift is None:
+        shift = ip.inertia_shift(path, bw, problem.shift)
     while shift <= MAX_SHIFT:
         if shift > 0.0:
             try:
