@@ -33,8 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..bvp.band import cholesky_pivot
-from ..bvp.newton import rounding_level
+from ..bvp.band import cholesky_pivot, rounding_level
 from .barrier import BOUND_TOLERANCE, Inequalities, next_barrier
 from .filter_steps import filter_step
 from .log import IterationLog
@@ -60,6 +59,10 @@ from ..core.results import BVPResult, Status
 #: N = 150 from the chord guess, a saddle of cost 32.3576 with reduced eigenvalue −0.197
 #: accepted; capped, the solve goes on to the minimum 32.3515, smallest eigenvalue +4.4).
 PENALTIES, CAP = (0.0, 1.0, 1e2), 1e6
+#: The largest relative tolerance whose stalled corrections can be rounding's
+#: (:meth:`InteriorPoint._stagnant`): stalls are judged against 10⁴ times the smaller of
+#: it and the tolerance asked.
+ROUNDING = 1e-8
 
 
 class InteriorPoint:
@@ -264,11 +267,11 @@ class InteriorPoint:
             if max(error, correction) <= tolerance and self.bounds_hold():
                 floor = self.rounding_floor(path, kkt)
                 if max(error, correction) + floor <= tolerance:
-                    return path, Status.SUCCESS, (
-                        f"; Newton correction of the KKT system (μ = 0) {correction:.1e}, "
-                        f"rounding floor {floor:.1e}, within xtol·(1 + size) = "
-                        f"{tolerance:.1e} (barrier parameter {self.mu:.1e}), "
-                        f"{self._last_errors()}")
+                    confirmed = self._confirmed(path, tolerance, correction, floor)
+                    if confirmed is not None:
+                        return confirmed
+                    res, ab, bw, _, _ = self.system(path)
+                    break
                 # small by luck against the noise: judged as that sum, and on (from the
                 # system at path again: the floor assembled another in its place)
                 self.corrections[-1] += floor
@@ -311,6 +314,28 @@ class InteriorPoint:
                 f"the interior-point line search stalled at iteration {it} (barrier "
                 f"parameter {self.mu:.1e}, {self._last_errors()})")
         return moved, None, ""
+
+    def _confirmed(self, path: Path, tolerance: float, correction: float, floor: float):
+        """(path, SUCCESS, message) once the μ = 0 KKT correction at an interior ``path``
+        is within the tolerance, or None to iterate on. That correction linearises
+        s∘z = 0 across the whole active set at once, and where μ is still large it is
+        not the distance to the KKT point: the torque-limited slew at N = 1000 with
+        xtol = 1e-2 stopped at μ = 0.4 with a correction of 2.0e-2 and was 0.12 from the
+        optimum (3–5× its estimate for xtol 1e-2 … 1e-3). So the active-set Newton of
+        :mod:`.polish` finishes from it — two corrections in a row within the tolerance,
+        quadratic convergence shown — and where it cannot, the interior point goes on;
+        its own estimate stands alone only where the active-set Newton is unavailable
+        (gauged constraints), and then only with μ at its floor, in the quadratic
+        regime."""
+        finished = self.finish(path, tolerance)
+        if finished is not None:
+            return finished[0], Status.SUCCESS, f" (finished from its last iterate){finished[1]}"
+        if self.problem.gauge is None or self.mu > self.floor:
+            return None
+        return path, Status.SUCCESS, (
+            f"; Newton correction of the KKT system (μ = 0) {correction:.1e}, rounding "
+            f"floor {floor:.1e}, within xtol·(1 + size) = {tolerance:.1e} (barrier "
+            f"parameter {self.mu:.1e}), {self._last_errors()}")
 
     def _barrier_solved(self, res: np.ndarray, bw: int, path: Path, error: float,
                         tolerance: float) -> bool:
@@ -416,7 +441,11 @@ class InteriorPoint:
             return None     # not near a solution: not rounding's doing
         recent, before = min(c[-n:]), min(c[-2 * n:-n])
         attainable = max(c[-n:])
-        if recent > 0.5 * before and attainable <= 1e4 * tolerance:
+        # and far below the path's size: at xtol = 1e-2 the planar flyer's corrections
+        # hovered at 0.7 in a basin it had not left, and 1e4 × the tolerance called that
+        # rounding (ILL_CONDITIONED 3.0 from the optimum, which xtol = 1e-4 found)
+        size = tolerance / self.xtol
+        if recent > 0.5 * before and attainable <= 1e4 * min(tolerance, ROUNDING * size):
             return attainable
         return None
 

@@ -15,7 +15,6 @@ from __future__ import annotations
 import numpy as np
 
 from .barrier import TAU_MIN, boundary_step, safeguarded
-from ..bvp.globalisation import curvature
 from ..bvp.optimality import MAX_SHIFT, next_shift
 from ..core.paths import Path
 
@@ -98,7 +97,7 @@ def _backtrack(ip, path: Path, ab, bw: int, delta, ds, dz, Gd, c, shift: float,
     nu = problem.penalty = max(wanted, 0.5 * (problem.penalty + wanted))
     descent = float(ip.stencil[nodes] @ delta[nodes] + lam @ phi_d - (z * Gd).sum()) \
         - mu * float((ds / s).sum()) - nu * infeasibility
-    if descent >= 0 or curvature(ip.model, ab, bw, delta, nodes, shift) <= 0:
+    if descent >= 0 or problem.curvature(ab, bw, delta, nodes, shift) <= 0:
         return None
     cost, noise = problem.merit(path)
     if -descent <= noise * (1 + nu):

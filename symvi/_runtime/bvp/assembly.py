@@ -10,7 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .band import factor, lu_solve, positive_definite, reciprocal_condition
+from .band import (factor, lu_solve, positive_definite, product, reciprocal_condition,
+                   rounding_level)
 from .gauge import Gauge
 from .lifted import LIFT_FROM, LiftedSystem
 from .optimality import FIRST_SHIFT
@@ -26,6 +27,9 @@ class Problem:
     would round it to ε/h, which the fourth-order structure of a second-order residual
     amplifies into O(1) errors of the slowest modes at N = 10⁵.
     """
+
+    #: Unknowns after the band's (a free horizon's T: :mod:`.bordered`)
+    BORDER = 0
 
     def __init__(self, model, p, h, lifted: bool | None = None):
         self.model, self.p, self.h = model, p, h
@@ -52,6 +56,10 @@ class Problem:
         self._last = None       # (path, assembly) of the last assembly with a Jacobian
         self._rows = None       # constraint_rows' mask
         self.gauge = None
+        #: Whether the last solve held an unknown beyond the band that its system could
+        #: not move (a free horizon at a path at rest: :mod:`.bordered`): its correction
+        #: then estimates no error
+        self.held = False
 
     def merit(self, path: Path) -> tuple[float, float]:
         """The cost S = Σ L_d and the size of its rounding error."""
@@ -122,6 +130,24 @@ class Problem:
         if self._lifted is not None:
             return self._lifted.minimum(shift)[0]
         return positive_definite(self.model, ab, bw, shift)
+
+    def curvature_beyond_band(self, ab, bw: int, shift: float = 0.0) -> float:
+        """What the inertia of the Newton matrix needs beyond the band's: nothing here
+        (inf); a free horizon's Schur complement (:mod:`.bordered`)."""
+        return np.inf
+
+    def curvature(self, ab, bw: int, delta: np.ndarray, nodes: np.ndarray,
+                  shift: float) -> float:
+        """d_ηᵀ (W + shift·I) d_η, W = ∂R_η/∂η the node block of the Jacobian (the Hessian
+        of S + λ·Φ_d), d_η the node part (mask ``nodes``) of ``delta``; ``ab`` in the
+        band storage of :meth:`assemble`."""
+        d = np.where(nodes, delta, 0.0)
+        with np.errstate(over="ignore", invalid="ignore"):      # a wild step: inf or nan
+            return float(d @ product(self.model, ab, bw, d)) + shift * float(d @ d)
+
+    def rounding_level(self, ab, bw: int, path: Path) -> float:
+        """The residual's rounding level at ``path`` (:func:`.band.rounding_level`)."""
+        return rounding_level(self.model, ab, bw, self.magnitudes(path))
 
     def _uses_lifted(self, n_nodes: int) -> bool:
         if not self.model.info.lifted:
@@ -210,7 +236,8 @@ class Problem:
         delta = 1e-2 * np.random.default_rng(0).uniform(-1.0, 1.0, (len(blocks), m.n
                                                                      + m.constraints))
         delta[(blocks < m.order) | (blocks > path.x.shape[0] - 1 - m.order)] = 0.0
-        moved = self.moved(path, np.concatenate([delta.reshape(-1), np.zeros(m.end_count)]), 1.0)
+        moved = self.moved(path, np.concatenate([delta.reshape(-1),
+                                                 np.zeros(m.end_count + self.BORDER)]), 1.0)
         if moved is None:
             raise ValueError("cannot vary the initial path to check the declared symmetries")
         return moved

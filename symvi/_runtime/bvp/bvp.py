@@ -22,6 +22,7 @@ import numpy as np
 from ..core import arguments
 from . import boundary_states
 from .assembly import Problem
+from .bordered import HorizonProblem
 from .band import cholesky_pivot
 from .gauge import check_boundary
 from .horizon import free_horizon
@@ -144,9 +145,10 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
                              f"number of steps ({len(guess.t_states) - 1}), not n_steps = {N}")
         nodes = (boundary_states.element_nodes(model, start, h, "start"),
                  boundary_states.element_nodes(model, end, h, "end"))
-        result = boundary_states.attach(model, fixed_horizon(
-            model, *nodes, N + 1, h, p, guess, options), h)
-    elif info.free_horizon:
+        result = fixed_horizon(model, *nodes, N + 1, h, p, guess, options, (start, end))
+        solved = info.free_horizon and len(result.t)    # the horizon found, h = T/N
+        result = boundary_states.attach(model, result, result.T / (N + 1) if solved else h)
+    elif info.free_horizon and model.inequalities:
         result = free_horizon(
             lambda step, previous: fixed_horizon(model, start, end, N, step, p, (
                 guess if previous is None else previous), options),
@@ -157,13 +159,20 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
 
 
 def fixed_horizon(model, start, end, N: int, h: float, p, guess,
-                  options: SolveOptions) -> BVPResult:
+                  options: SolveOptions, states=None) -> BVPResult:
     """The whole-trajectory solve at the step h under ``options``: see :func:`solve_bvp`
-    (with inequalities, :func:`.bounded.bounded`)."""
+    (with inequalities, :func:`.bounded.bounded`). A free horizon without inequalities
+    is an unknown of the same Newton system, h its first guess (:mod:`.bordered`);
+    ``states``, the (start, end) States whose elements ``start`` and ``end`` are."""
     path = initial_path(model, start, end, N, guess, p, h)
     if isinstance(path, BVPResult):
         return path
-    problem = Problem(model, p, h)
+    if model.info.free_horizon and not model.inequalities:
+        steps = N - (states is not None)         # h = T/N of the States' grid
+        path = replace(path, T=steps * h)
+        problem = HorizonProblem(model, p, steps, states)
+    else:
+        problem = Problem(model, p, h)
     if model.inequalities:
         # bvp/'s one import of bounded/, made only for a model with inequalities:
         # bounded/ builds on bvp/, and a model without bounds never loads it.
@@ -179,6 +188,9 @@ def fixed_horizon(model, start, end, N: int, h: float, p, guess,
     if model.info.gauges:
         check_boundary(model, path, problem.perturbed(path), p, h)
     path, norms, steps, status, message = newton(problem, path, options)
+    if path.T is not None:
+        h = path.T / problem.N
+        message += f"; free horizon T = {path.T:.12g}"
     if status == Status.SUCCESS and problem.minimise:
         status, message = _minimum(problem, path, message)
     if status == Status.SUCCESS:
@@ -202,15 +214,16 @@ def _minimum(problem: Problem, path: Path, message: str) -> tuple[Status, str]:
     _, ab, bw, finite = problem.assembled(path)
     if finite and problem.lifted_system is not None:
         minimum, excess = problem.lifted_system.minimum()
-        if minimum:
+        if minimum and problem.curvature_beyond_band(ab, bw) > 0:
             return Status.SUCCESS, message
         pivot = (f" ({excess} negative eigenvalues, from the lifted system's inertia)"
                  if excess > 0 else " (a vanishing pivot in the lifted system's inertia: "
                  "the Hessian is singular to working precision)")
     else:
-        verdict = second_order(ab, bw, problem.constraint_rows(path),
+        verdict = second_order(ab, bw, problem.constraint_rows(path)[:ab.shape[1]],
                                lambda: cholesky_pivot(problem.model, ab, bw)) if finite else None
-        if verdict is not None and verdict.minimum:
+        if verdict is not None and verdict.minimum \
+                and problem.curvature_beyond_band(ab, bw) > 0:
             return Status.SUCCESS, message
         pivot = "" if verdict is None else (
             f" (Cholesky pivot {verdict.pivot:.1e} of W + ρAᵀA at ρ = {verdict.rho:.1e})")

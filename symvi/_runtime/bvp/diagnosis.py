@@ -134,6 +134,8 @@ def diagnose(problem, path: Path) -> ConstraintDiagnosis | None:
     if not finite:
         return None
     J = _sparse(ab, bw)
+    # the band's rows (a free horizon's T follows them: .bordered)
+    rows, res = rows[:ab.shape[1]], res[:ab.shape[1]]
     A = J[rows][:, ~rows].toarray()
     # rows without node entries and a 1 on the diagonal pin the multipliers of a free
     # end's missing window; an end condition without gradient stays (a finding)

@@ -7,19 +7,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .band import product
 from .optimality import MAX_SHIFT, convexifying_shift, next_shift
 from ..core.paths import Path
-
-
-def curvature(model, ab: np.ndarray, bw: int, delta: np.ndarray, nodes: np.ndarray,
-              shift: float) -> float:
-    """d_ηᵀ (W + shift·I) d_η, W = ∂R_η/∂η the node block of the Jacobian (the Hessian of
-    S + λ·Φ_d), d_η the node part of ``delta``; ``ab`` in the band storage of
-    :meth:`.assembly.Problem.assemble`."""
-    d = np.where(nodes, delta, 0.0)
-    with np.errstate(over="ignore", invalid="ignore"):      # a wild step: inf or nan
-        return float(d @ product(model, ab, bw, d)) + shift * float(d @ d)
 
 
 def descent_step(problem, state, res, ab, bw, delta, contracting: bool = False,
@@ -84,7 +73,9 @@ def descent_step(problem, state, res, ab, bw, delta, contracting: bool = False,
     cost, noise = problem.merit(state)
     if abs(slope(delta)) <= noise * (1 + problem.penalty):
         return state, None
-    scale, shift = float(np.abs(ab[2 * bw][nodes]).max(initial=0.0)), problem.shift
+    # the band's unknowns (a free horizon's T follows them: .bordered)
+    scale = float(np.abs(ab[2 * bw][nodes[:ab.shape[1]]]).max(initial=0.0))
+    shift = problem.shift
     if not rows.any() and not (contracting and problem.convex):
         shift = convexifying_shift(lambda mu: problem.definite(ab, bw, mu * scale), shift,
                                    problem.first_shift)
@@ -96,7 +87,7 @@ def descent_step(problem, state, res, ab, bw, delta, contracting: bool = False,
                 shift = next_shift(shift, problem.first_shift)
                 continue
         descent, nu, alpha = slope(delta), problem.penalty, 1.0
-        if rows.any() and curvature(problem.model, ab, bw, delta, nodes, shift * scale) <= 0.0:
+        if rows.any() and problem.curvature(ab, bw, delta, nodes, shift * scale) <= 0.0:
             descent = 0.0       # into W's negative curvature: shift instead
         while descent < 0.0 and alpha >= min_alpha:
             trial = problem.moved(state, delta, alpha)

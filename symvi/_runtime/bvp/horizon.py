@@ -1,4 +1,6 @@
-"""A free final time: the horizon T = N·h that minimises J_d + ρ·T (issue 21).
+"""A free final time with inequalities: the horizon T = N·h that minimises J_d + ρ·T by
+an outer iteration (issue 21). Without inequalities the horizon is an unknown of the
+Newton system itself (:mod:`.bordered`), which converges in the iterations of one solve.
 
 The whole-trajectory solve at a fixed h gives the optimal discrete cost J*(T). Its
 derivative needs no second solve: by the envelope theorem dJ*/dT = (1/N) ∂ℒ/∂h, the

@@ -13,7 +13,6 @@ import sys
 
 import numpy as np
 
-from .band import product
 from .globalisation import descent_step, line_search, natural_step
 from ..core.options import SolveOptions
 from ..core.results import Status
@@ -94,9 +93,9 @@ def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list,
     size = float(np.abs(delta).max(initial=0.0))
     tolerance = xtol * (1.0 + problem.size(state))
     corrections.append(size)
-    level = rounding_level(problem.model, ab, bw, problem.magnitudes(state))
+    level = problem.rounding_level(ab, bw, state)
     problem.level = level
-    if size <= tolerance:
+    if size <= tolerance and not problem.held:
         return _within_tolerance(problem, state, ab, bw, res, delta, size, tolerance,
                                  corrections[-2], it)
     taken = None
@@ -198,15 +197,3 @@ def _rounding_limited(finding: str, attainable: float, tolerance: float):
         f"{finding} > the tolerance xtol·(1 + size) = {tolerance:.1e}: rounding amplified "
         f"by the Newton matrix's conditioning limits the attainable accuracy to about "
         f"{attainable:.0e}; accept it with a larger xtol, or use fewer steps")
-
-
-def rounding_level(model, ab: np.ndarray, bw: int, u: np.ndarray) -> float:
-    """Attainable residual: 16 ε ‖ |J| u ‖∞, u the unknowns' magnitudes (first order);
-    ``ab`` holds J in LAPACK band storage, ab[2 bw + row − col, col] = J[row, col].
-
-    When the line search finds no descent from a residual below it, Newton has converged
-    as far as floating point allows, even if its update, amplified by the condition
-    number (∝ N⁴ for fourth differences), still exceeds xtol.
-    """
-    scale = product(model, ab, bw, u, absolute=True)
-    return 16 * np.finfo(float).eps * float(scale.max(initial=0.0))

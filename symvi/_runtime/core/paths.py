@@ -33,6 +33,8 @@ class Path:
     lam: np.ndarray  # (windows, s)
     #: The end conditions' multipliers ν (at least one number: a pointer for C).
     nu: np.ndarray = field(default_factory=lambda: np.zeros(1))
+    #: The horizon, where it is an unknown (a free final time: ``bvp/bordered.py``).
+    T: float | None = None
 
     def copy(self) -> "Path":
         return replace(self, x=self.x.copy(), g=self.g.copy(), f=self.f.copy(),

@@ -1,0 +1,150 @@
+"""The horizon inside Newton (issue 50, item 2): a free final time without inequalities
+is one more unknown of the whole-trajectory Newton system (``_runtime/bvp/bordered.py``).
+
+Checked against exact optima: the double integrator min ∫ε u²/2 + ρT between States has
+J*(T) in closed form, so T* is known to rounding; the spin-up with a free horizon is
+exact at every N (``test_end_conditions``). The bordered matrix's row is taken as its
+column's transpose: checked here by differentiating the horizon equation along random
+node variations. The cart-pole's optimal horizon is checked against fixed-horizon
+solves of the bundled ``cart_pole_oc`` around it.
+"""
+from __future__ import annotations
+
+import importlib
+
+import numpy as np
+import pytest
+import sympy as sp
+from scipy.optimize import minimize_scalar
+
+from symvi import Example, PairGroupoid, State, optimal_control
+from symvi.build import compile_model
+from symvi.models.cart_pole_oc import G as CART_POLE, LAGRANGIAN, PARAMETERS, u as FORCE
+
+
+def double_integrator():
+    G = PairGroupoid("x")
+    (v,) = G.qdot
+    u = sp.Symbol("u", real=True)
+    eps, rho = sp.symbols("epsilon rho", positive=True)
+    return optimal_control(
+        name="double_integrator_timed", groupoid=G, lagrangian=v**2 / 2,
+        cost=eps * u**2 / 2, controls=[u], actuated=[0], parameters={eps: 1.0, rho: 1.0},
+        time_cost=rho, example=Example(h=0.02, n_steps=100, start=np.zeros((2, 1)),
+                                       end=np.ones((2, 1))))
+
+
+def cart_pole_timed():
+    rho = sp.Symbol("rho", positive=True)
+    return optimal_control(
+        name="cart_pole_timed", groupoid=CART_POLE, lagrangian=LAGRANGIAN,
+        cost=FORCE**2 / 2, controls=[FORCE], actuated=[0],
+        parameters=PARAMETERS | {rho: 1.0}, time_cost=rho,
+        example=Example(h=0.01, n_steps=200, start=np.zeros((2, 2)),
+                        end=np.array([[1.0, 0.0]] * 2)))
+
+
+@pytest.fixture(scope="module")
+def models(build_dir):
+    return {"di": compile_model(double_integrator(), build_dir),
+            "cart": compile_model(cart_pole_timed(), build_dir)}
+
+
+def exact_horizon(v0: float, eps: float, rho: float) -> float:
+    """T* of min ε/2 ∫u² + ρT, x(0) = 0, ẋ(0) = v0, x(T) = 1, ẋ(T) = 0: the least ∫u²
+    of a double integrator is (12a² − 12abT + 4b²T²)/T³, a = 1 − v0 T, b = −v0."""
+    def F(T):
+        a, b = 1.0 - v0 * T, -v0
+        return eps / 2 * (12 * a * a - 12 * a * b * T + 4 * b * b * T * T) / T**3 + rho * T
+    return float(minimize_scalar(F, bounds=(0.2, 10.0), method="bounded",
+                                 options=dict(xatol=1e-13)).x)
+
+
+@pytest.mark.parametrize("v0", [0.0, 0.7])
+def test_the_horizon_converges_at_order_two_from_states(models, v0):
+    """From States (at rest, and leaving at speed 0.7) the optimal horizon converges to
+    the continuous T* at order 2 (measured 2.000), each solve one Newton iteration count
+    whatever N (the outer secant took 10–14 solves)."""
+    exact = exact_horizon(v0, 1.0, 1.0)
+    sizes = (25, 50, 100, 200, 400)
+    errors, iterations = [], []
+    for N in sizes:
+        r = models["di"].solve_bvp(State(x=[0.0], v=[v0]), State(x=[1.0], v=[0.0]), N, T=2.0)
+        assert r.success, r.message
+        assert r.T == r.t_states[-1] and "free horizon T" in r.message
+        errors.append(abs(r.T - exact))
+        iterations.append(r.iterations)
+    orders = np.log2(np.array(errors[:-1]) / errors[1:])
+    print(f"\nv0 = {v0}: T* = {exact:.12f}, errors {np.array(errors)}, orders {orders}, "
+          f"iterations {iterations}")
+    assert np.all(np.abs(orders - 2.0) < 0.05)
+    assert max(iterations) <= 8
+
+
+@pytest.mark.parametrize("ratio", [1.0, 1e2, 1e4])
+@pytest.mark.parametrize("first", [0.5, 3.0])
+def test_time_weights_and_first_guesses(models, ratio, first):
+    """ε u² + ρT with ρ/ε from 1 to 10⁴ (the secant STALLed from ρ ≥ 100 ε), from first
+    horizons T*/2 and 3T*: SUCCESS at the discrete optimum, the same from both guesses
+    (to the tolerance), within O(h²) of the continuous T*."""
+    eps, rho, N = 1.0 / ratio, 1.0, 200
+    exact = exact_horizon(0.0, eps, rho)
+    r = models["di"].solve_bvp(State(x=[0.0], v=[0.0]), State(x=[1.0], v=[0.0]), N,
+                               T=first * exact, params=dict(epsilon=eps, rho=rho))
+    assert r.success, r.message
+    assert abs(r.T - exact) <= 1.0 / N**2, (r.T, exact)
+    other = models["di"].solve_bvp(State(x=[0.0], v=[0.0]), State(x=[1.0], v=[0.0]), N,
+                                   T=exact, params=dict(epsilon=eps, rho=rho))
+    assert abs(r.T - other.T) <= 1e-9 * (1 + exact), (r.T, other.T)
+
+
+def runtime_of(mod, stage: str):
+    return importlib.import_module(f"{type(mod.model).__module__.rsplit('.', 1)[0]}.{stage}")
+
+
+def test_the_border_row_is_the_columns_transpose(models):
+    """The design's premise: ∂G/∂(node variation) = ∂R/∂T (R the gradient of ℒ, G its
+    T-derivative), measured on the cart-pole with random multipliers at a non-optimal
+    path, G differentiated along random corrections by central differences."""
+    mod = models["cart"]
+    bordered = runtime_of(mod, "bvp.bordered")
+    paths = runtime_of(mod, "core.paths")
+    N, T = 40, 2.0
+    p = mod.model.params(None)
+    start, end = np.zeros((2, 2)), np.array([[1.0, 0.0]] * 2)
+    path = paths.initial_path(mod.model, start, end, N, None, p, T / N)
+    from dataclasses import replace
+    path = replace(path, T=T)
+    problem = bordered.HorizonProblem(mod.model, p, N)
+    rng = np.random.default_rng(3)
+    size = problem.assemble(path, False)[0].size
+    path = problem.moved(path, np.append(0.05 * rng.standard_normal(size - 1), 0.0), 1.0)
+    path.lam[:] = rng.standard_normal(path.lam.shape)
+    problem.assemble(path, True)
+    b, _ = problem.border
+    for _ in range(3):
+        w = np.append(rng.standard_normal(size - 1), 0.0)
+        step = 1e-6
+        sides = [problem.horizon_gradient(problem.moved(path, w, s)) for s in (step, -step)]
+        row = (sides[0] - sides[1]) / (2 * step)
+        assert row == pytest.approx(float(b @ w[:-1]), rel=1e-7)
+
+
+def test_cart_pole_horizon_is_where_fixed_horizon_solves_are_cheapest(models, compiled):
+    """At the returned T*, F(T) = J*(T) + ρT sampled by fixed-horizon solves of the bundled
+    ``cart_pole_oc`` (the same discrete problem at h = T/N) is smallest: a parabola
+    through the samples has its vertex at T* (to 1e-6), and the costs agree at T*."""
+    N = 60
+    free, fixed = models["cart"], compiled("cart_pole_oc")
+    start, end = np.zeros((2, 2)), np.array([[1.0, 0.0]] * 2)
+    r = free.solve_bvp(start, end, N, T=2.0)
+    assert r.success, r.message
+    same = fixed.solve_bvp(start, end, N, T=r.T)
+    assert same.success and abs(same.cost - r.cost) <= 1e-9 * r.cost
+    offsets = np.array([-2e-4, -1e-4, 0.0, 1e-4, 2e-4])
+    F = np.array([fixed.solve_bvp(start, end, N, T=r.T + d, guess=same).cost + r.T + d
+                  for d in offsets])
+    a, b, _ = np.polyfit(offsets, F, 2)
+    print(f"\nT* = {r.T:.10f} ({r.iterations} iterations); vertex at {-b / (2 * a):+.1e}")
+    assert F[2] <= F.min() + 1e-12 * F[2]
+    assert abs(b / (2 * a)) <= 1e-6
