@@ -152,6 +152,108 @@ def slew_stagewise(path, start, end, N, h, inertia, tau_max, omega_max) -> Nlp:
 
 
 # ---------------------------------------------------------------------------------------
+# minimum_time_slew: spacecraft_slew's torque limits, min Σ L_d + ρT over the increments
+# and T (h = T/N an unknown); rest to rest, so the end increments are 0 whatever h
+# ---------------------------------------------------------------------------------------
+def _timed_functions(inertia: np.ndarray, g_last: np.ndarray):
+    """``bench_bvp.casadi_functions`` with the step h an input: (L_d(a, b, h),
+    step(g, a, h), end(g), torque(a, b, h))."""
+    a, b, g, h = ca.SX.sym("a", 3), ca.SX.sym("b", 3), ca.SX.sym("g", 9), ca.SX.sym("h")
+    omega, rate = (a + b) / 2, (b - a) / h
+    tau = inertia * rate + ca.cross(omega, inertia * omega)
+    w = h * a
+    w_hat = ca.vertcat(ca.horzcat(0, -w[2], w[1]), ca.horzcat(w[2], 0, -w[0]),
+                       ca.horzcat(-w[1], w[0], 0))
+    cay = ca.SX.eye(3) + 4 / (4 + ca.sumsqr(w)) * (w_hat + w_hat @ w_hat / 2)
+    W = ca.DM(g_last).T @ ca.reshape(g, 3, 3)
+    C = ca.solve(W + ca.SX.eye(3), 2 * (W - ca.SX.eye(3)))
+    return (ca.Function("L_d", [a, b, h], [h * ca.sumsqr(tau / inertia) / 2]),
+            ca.Function("step", [g, a, h], [ca.vec(ca.reshape(g, 3, 3) @ cay)]),
+            ca.Function("end", [g], [ca.vertcat(C[2, 1], C[0, 2], C[1, 0])]),
+            ca.Function("torque", [a, b, h], [tau]))
+
+
+def _at_rest(start, end) -> None:
+    if not (np.array_equal(start[0], start[1]) and np.array_equal(end[0], end[1])):
+        raise ValueError("the minimum-time slew's formulations assume rest-to-rest ends")
+
+
+def timed_slew_compact(path, start, end, N, h, inertia, tau_max, rho) -> Nlp:
+    """:func:`slew_compact`'s unknowns and T last; cost Σ_w L_d(·, T/N) + ρT; |τ_w| ≤ τ_max
+    (the minimum-time slew bounds no rate)."""
+    _at_rest(start, end)
+    L_d, step, end_defect, torque = _timed_functions(inertia, end[0])
+    X, G, T = ca.SX.sym("xi", 3, N - 2), ca.SX.sym("g", 9, N - 3), ca.SX.sym("T")
+    hh = T / N
+    xi = ca.horzcat(ca.DM.zeros(3, 1), X, ca.DM.zeros(3, 1))
+    cost = ca.sum2(L_d.map(N - 1)(xi[:, :-1], xi[:, 1:], hh)) + rho * T
+    torques = ca.vec(torque.map(N - 1)(xi[:, :-1], xi[:, 1:], hh))
+    following = step.map(N - 2)(ca.horzcat(ca.DM(start[1].flatten(order="F")), G), X, hh)
+    equalities = ca.vertcat(ca.vec(following[:, :-1] - G), end_defect(following[:, -1]))
+    count = equalities.shape[0]
+    limits = tau_max * np.ones(torques.shape[0])
+    x = ca.vertcat(ca.vec(X), ca.vec(G), T)
+    lbx, ubx = np.full(x.shape[0], -np.inf), np.full(x.shape[0], np.inf)
+    lbx[-1] = 1e-3
+    x0 = np.concatenate([path.f[1:-1].reshape(-1), _column_major(path.g[2:-2]).reshape(-1),
+                         [N * h]])
+    return Nlp("compact", x, cost, ca.vertcat(equalities, torques),
+               np.r_[np.zeros(count), -limits], np.r_[np.zeros(count), limits], lbx, ubx,
+               x0, [True] * count + [False] * limits.size,
+               lambda r: np.concatenate([np.asarray(r.f)[1:-1].reshape(-1),
+                                         _column_major(r.g[2:-2]).reshape(-1), [r.T]]))
+
+
+def timed_slew_stagewise(path, start, end, N, h, inertia, tau_max, rho) -> Nlp:
+    """:func:`slew_stagewise` with T a state of every stage (T_{k+1} = T_k, the way
+    FATROP takes a free horizon): state (ξ_k, g_{k+1}, T) (13), control ξ_{k+1}; ρT on
+    the last stage; the first state's ξ_0 and g_1 fixed, its T free."""
+    _at_rest(start, end)
+    L_d, step, end_defect, torque = _timed_functions(inertia, end[0])
+    K = N - 2
+    S = [ca.SX.sym(f"s{k}", 13) for k in range(K + 1)]
+    U = [ca.SX.sym(f"u{k}", 3) for k in range(K)]
+    variables, rows, lbg, ubg, equality, cost = [], [], [], [], [], 0
+    ones = np.ones(3)
+
+    def stage(a, b, T):
+        nonlocal cost
+        cost += L_d(a, b, T / N)
+        rows.append(torque(a, b, T / N))
+        lbg.append(-tau_max * ones), ubg.append(tau_max * ones)
+        equality.extend([False] * 3)
+
+    for k in range(K):
+        variables.extend([S[k], U[k]])
+        T = S[k][12]
+        rows.append(S[k + 1] - ca.vertcat(U[k], step(S[k][3:12], U[k], T / N), T))
+        lbg.append(np.zeros(13)), ubg.append(np.zeros(13)), equality.extend([True] * 13)
+        stage(S[k][:3], U[k], T)
+    variables.append(S[K])
+    rows.append(end_defect(S[K][3:12]))
+    lbg.append(np.zeros(3)), ubg.append(np.zeros(3)), equality.extend([True] * 3)
+    stage(S[K][:3], ca.DM.zeros(3, 1), S[K][12])
+    cost += rho * S[K][12]
+    x = ca.vertcat(*variables)
+    lbx, ubx = np.full(x.shape[0], -np.inf), np.full(x.shape[0], np.inf)
+    fixed = np.r_[np.zeros(3), start[1].flatten(order="F")]
+    lbx[:12], ubx[:12] = fixed, fixed
+
+    def layout(f, g, T):
+        parts = []
+        for k in range(K):
+            parts.extend([f[k], g[k + 1], [T], f[k + 1]])
+        parts.extend([f[K], g[K + 1], [T]])
+        return np.concatenate(parts)
+
+    x0 = layout(path.f, _column_major(path.g), N * h)
+    x0[:12] = fixed
+    return Nlp("stage-wise", x, cost, ca.vertcat(*rows), np.concatenate(lbg),
+               np.concatenate(ubg), lbx, ubx, x0, equality,
+               lambda r: layout(np.asarray(r.f), _column_major(r.g), r.T))
+
+
+# ---------------------------------------------------------------------------------------
 # cart_pole_swing_up: nodes q_0 … q_N = (x, θ), three-point rule on windows (q_w, q_{w+1},
 # q_{w+2}); q_0, q_1, q_{N−1}, q_N fixed
 # ---------------------------------------------------------------------------------------

@@ -196,8 +196,6 @@ def test_underactuated_and_bounded_problems_take_states(compiled):
      "end state's velocity is outside the retraction's chart"),
     ("cart_pole_catch", State(x=[0, 0.3], v=[0, 0]), State(x=[0, 0], v=[0, 0]),
      "end is free or given by end conditions"),
-    ("minimum_time_slew", State(g=np.eye(3), v=[0, 0, 0]), State(g=np.eye(3), v=[0, 0, 0]),
-     "free final time"),
     ("planar_flyer", State(x=[0, 0], v=[0, 0, 0]), State(x=[0, 0], v=[0, 0, 0]),
      "pair groupoid or matrix Lie groups"),
     ("pendulum", State(x=[0], v=[0]), State(x=[1], v=[0]), "order-1 problem fixes its end"),

@@ -115,14 +115,20 @@ def test_an_interior_point_option_reaches_the_interior_point(slew, monkeypatch):
 
 
 def test_a_horizon_option_changes_the_free_horizon(compiled):
-    """``horizon_maxiter`` (read by ``horizon.py`` alone): one secant step is not enough
-    for the minimum-time slew, which then ends MAX_ITERATIONS naming it."""
+    """``horizon_maxiter`` (read by ``horizon.py`` alone, the outer iteration that
+    ``horizon_method="secant"`` asks for): one secant step is not enough for the minimum-time
+    slew, which then ends MAX_ITERATIONS naming it; the default, the horizon an unknown
+    of Newton, finds the same T as the secant."""
     module = compiled("minimum_time_slew")
     ex = get("minimum_time_slew").example
     guess = ex.guess_nodes(ex.n_steps, module.model.order)
     solved = module.solve_bvp(ex.start, ex.end, ex.n_steps, ex.h, guess=guess)
-    cut = module.solve_bvp(ex.start, ex.end, ex.n_steps, ex.h, guess=guess, horizon_maxiter=1)
+    cut = module.solve_bvp(ex.start, ex.end, ex.n_steps, ex.h, guess=guess, horizon_maxiter=1,
+                           horizon_method="secant")
+    secant = module.solve_bvp(ex.start, ex.end, ex.n_steps, ex.h, guess=guess,
+                              horizon_method="secant")
     assert solved.success, solved.message
+    assert secant.success and abs(secant.T - solved.T) <= 1e-8, (secant.T, solved.T)
     assert cut.status.name == "MAX_ITERATIONS"
     assert cut.message.startswith("the free horizon did not converge in 1 steps")
 

@@ -8,7 +8,8 @@ fails the same way, the penalty stages (:mod:`.penalty`) move the start toward t
 bounds and it starts again; where that fails too, the stages continue to a certificate
 of local infeasibility. A warm start (a previous result) goes to the active-set Newton
 (:mod:`.polish`) first, from the previous active set. Each phase's verdict is the
-interior point's SUCCESS rule.
+interior point's SUCCESS rule. With the horizon an unknown (:mod:`.bvp.bordered`) only
+the interior point from the guess runs (:func:`bounded_horizon`).
 """
 from __future__ import annotations
 
@@ -69,6 +70,26 @@ def bounded(problem, path: Path, options: SolveOptions, cold: bool,
     if status == Status.SUCCESS:
         message = f"interior point from the guess: {iterations} iterations{message}"
     return ip.result(end, iterations, status, message)
+
+
+def bounded_horizon(problem, path: Path, options: SolveOptions, cold: bool,
+                    active: np.ndarray | None = None) -> BVPResult:
+    """:func:`bounded` with the horizon an unknown (``problem`` a
+    :class:`.bordered.HorizonProblem`): the warm start's active-set Newton, then the
+    interior point from the guess — not the penalty phases, which hold the horizon, and
+    whose certificate of infeasibility would be one for this horizon only (a horizon too
+    short for the bounds is lengthened, not INFEASIBLE: issue 50). Its failure is the
+    caller's to answer (:func:`.bvp.solve_bvp`: the outer iteration on T)."""
+    options = options.replace(ftol=0.0)
+    if active is not None:
+        warm = _warm(problem, path, active, options)
+        if warm is not None:
+            return warm
+    ip, end, iterations, status, message = _interior(problem, path, options, near=not cold)
+    if status == Status.SUCCESS:
+        message = f"interior point from the guess, the horizon an unknown: {iterations} " \
+                  f"iterations{message}"
+    return ip.result(end, iterations, status, f"{message}; free horizon T = {end.T:.12g}")
 
 
 def _from_the_unbounded_optimum(problem, path: Path, options: SolveOptions, spent: int = 0,

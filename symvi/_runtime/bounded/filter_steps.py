@@ -33,7 +33,7 @@ def filter_step(ip, path: Path, res, ab, bw: int, delta, ds, dz, Gd, error: floa
     if shift > 0.0:
         try:
             shifted = problem.solve(ab, bw, -res, shift * ip.scale, ip.nodes)
-            direction = (shifted, *ip.steps(shifted, path, ip.mu * problem.h, c))
+            direction = (shifted, *ip.steps(shifted, path, ip.mu * ip.unit, c))
         except LinAlgError:
             direction = None
     moved = None if direction is None or not np.isfinite(shift) else \
@@ -44,7 +44,7 @@ def filter_step(ip, path: Path, res, ab, bw: int, delta, ds, dz, Gd, error: floa
         return moved
     # the trials evaluated c elsewhere: the merit's step needs it at path (and the same
     # inertia correction, not found again)
-    ip.inequalities.evaluate(path, problem.p, problem.h)
+    ip.inequalities.evaluate(path, problem.p, problem.step(path))
     return step(ip, path, res, ab, bw, delta, ds, dz, Gd, error, shift)
 
 
@@ -57,7 +57,7 @@ def infeasibility(ip, path: Path, stencil: np.ndarray, c: np.ndarray, s: np.ndar
 def _search(ip, path: Path, delta, ds, dz, Gd, c):
     """Backtracking on the filter from the fraction-to-the-boundary step: the moved path
     (slacks and multipliers set), or None below the filter's smallest step."""
-    problem, mu, flt = ip.problem, ip.mu * ip.problem.h, ip.filter
+    problem, mu, flt = ip.problem, ip.mu * ip.unit, ip.filter
     s, z = ip.s, ip.z(path).copy()
     lam, rows, nodes = problem.multipliers(path), ip.rows, ip.nodes
     theta = infeasibility(ip, path, ip.stencil, c, s)

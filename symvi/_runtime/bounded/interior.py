@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..bvp.band import cholesky_pivot, rounding_level
+from ..bvp.band import cholesky_pivot
 from .barrier import BOUND_TOLERANCE, Inequalities, next_barrier
 from .filter_steps import filter_step
 from .log import IterationLog
@@ -95,6 +95,7 @@ class InteriorPoint:
         self.corrections: list[float] = []     # the KKT corrections, one per iteration
         self.best = (np.inf, path, None)        # (correction, path, slacks) of the best
         self.verified = None        # a path :meth:`minimum` has verified (:meth:`finish`)
+        self._unconfirmed = None    # the last path the active-set Newton did not finish
         #: The active sets :meth:`_identified` tried, with the node correction of the try
         self._tried: dict[bytes, float] = {}
         self.node_correction = np.inf       # the last iteration's, for :meth:`_identified`
@@ -105,10 +106,16 @@ class InteriorPoint:
         self.failure = ""           # why a failed iteration stopped, without the diagnosis
         self.log = IterationLog("near a solution" if near else "from the guess",
                                 options.verbose)
-        self.inequalities.evaluate(path, problem.p, problem.h)
+        #: The barrier's unit of time: the barrier term of a window is μ·unit·log s (the
+        #: step h; with a free horizon, the first one, so that the barrier problem does
+        #: not change with T)
+        self.unit = problem.step(path)
+        #: ∂c/∂T at the last system's path where the horizon is an unknown, else None
+        self.rates = None
+        self.inequalities.evaluate(path, problem.p, self.unit)
         c = self.inequalities.values
         self.s = np.maximum(-c, 1e-2 * (1.0 + np.abs(c)))
-        path.lam[:, self.s_count:] = self.mu * problem.h / self.s
+        path.lam[:, self.s_count:] = self.mu * self.unit / self.s
 
     @property
     def history(self) -> dict[str, list]:
@@ -123,29 +130,54 @@ class InteriorPoint:
         """Assemble the reduced system at ``path``: (res, ab, bw, and the stencil
         residual's norms on the node and constraint rows), or None where something is
         not finite."""
-        p, h = self.problem.p, self.problem.h
         res, ab, bw, finite = self.problem.assemble(path, True)
         dual = float(np.abs(res[self.nodes]).max(initial=0.0))
         eq = float(np.abs(res[self.rows]).max(initial=0.0))
         self.stencil = res.copy()
         # the scale of inertia-correcting shifts: W's, not Σ's (10¹⁰ larger near the end)
-        self.scale = float(np.abs(ab[2 * bw][self.nodes]).max(initial=0.0))
+        self.scale = float(np.abs(ab[2 * bw][self.nodes[:ab.shape[1]]]).max(initial=0.0))
         self.hessian = np.array(ab, order="F")      # W, before the barrier adds GᵀΣG
-        finite &= self.inequalities.add_barrier(path, p, h, self.z(path), self.s,
-                                                self.mu * h, res, ab)
+        self.rates = self.problem.inequality_rates(path)
+        finite = finite and self.reduce(path, self.s, res, ab)
+        if finite and self.rates is not None:
+            # the horizon's column of the same elimination: GᵀΣg_T and g_TᵀΣg_T
+            sigma = self.z(path) / self.s
+            self.problem.add_to_border(
+                self.inequalities.transposed(sigma * self.rates, self.blocks, self.width),
+                float((sigma * self.rates ** 2).sum()))
         return (res, ab, bw, dual, eq) if finite else None
+
+    def reduce(self, path: Path, s: np.ndarray, res: np.ndarray, ab=None) -> bool:
+        """Add the eliminated slack and multiplier steps at ``path`` (slacks ``s``) to
+        the residual ``res`` (and the band ``ab``, unless None) assembled there: Gᵀ(zc +
+        μ)/s, and g_Tᵀ(zc + μ)/s on the horizon's row where T is an unknown (g_T =
+        ∂c/∂T at fixed elements); whether everything is finite."""
+        z, mu = self.z(path), self.mu * self.unit
+        if not self.inequalities.add_barrier(path, self.problem.p, self.problem.step(path),
+                                             z, s, mu, res, ab):
+            return False
+        rates = self.problem.inequality_rates(path)
+        if rates is not None:
+            res[-1] += float((rates * (z * self.inequalities.values + mu) / s).sum())
+        return bool(np.isfinite(res[-1]))
 
     def steps(self, delta: np.ndarray, path: Path, mu: float, c: np.ndarray | None = None):
         """(Δs, Δz, GΔη) of the eliminated rows for the reduced correction ``delta``; c
         the inequalities at ``path`` (default: the last evaluated)."""
         Gd = self.inequalities.linearised(delta, self.blocks, self.width)
+        if self.rates is not None:
+            Gd = Gd + self.rates * delta[-1]
         c = self.inequalities.values if c is None else c
         z, s = self.z(path), self.s
         return -(c + s) - Gd, (mu + z * c + z * Gd) / s, Gd
 
     def barrier_rhs(self, mu: float) -> np.ndarray:
-        """Gᵀ(μ/s) in the block layout: what the barrier adds to the reduced residual."""
-        return self.inequalities.transposed(mu / self.s, self.blocks, self.width)
+        """Gᵀ(μ/s) in the block layout: what the barrier adds to the reduced residual
+        (and g_Tᵀ(μ/s) on the horizon's row, where T is an unknown)."""
+        nodes = self.inequalities.transposed(mu / self.s, self.blocks, self.width)
+        if self.rates is None:
+            return nodes
+        return np.append(nodes, float((self.rates * mu / self.s).sum()))
 
     def kkt_correction(self, ab, bw: int, res: np.ndarray, path: Path) -> np.ndarray:
         """(Δη, Δλ, Δz) of the full Newton correction of the unperturbed KKT system
@@ -153,7 +185,7 @@ class InteriorPoint:
         assembled there at the current μ: its ∞-norm is the first-order estimate of the
         distance to the KKT point, barrier's bias included. Not Δs, which is Δη's noise
         amplified by G (:meth:`_barrier_error`)."""
-        delta = self.problem.solve(ab, bw, -(res - self.barrier_rhs(self.mu * self.problem.h)))
+        delta = self.problem.solve(ab, bw, -(res - self.barrier_rhs(self.mu * self.unit)))
         return np.concatenate([delta, self.steps(delta, path, 0.0)[1].ravel()])
 
     # -- the iteration -------------------------------------------------------------------
@@ -225,7 +257,7 @@ class InteriorPoint:
         if status not in (Status.STALLED, Status.MAX_ITERATIONS) or len(primal) < 10 \
                 or primal[-1] < 0.9 * primal[-10]:
             return status, message
-        p, h = self.problem.p, self.problem.h
+        p, h = self.problem.p, self.problem.step(path)
         self.inequalities.evaluate(path, p, h)
         c = self.inequalities.values
         if primal[-1] <= 1e-3 * (1.0 + float(np.abs(c).max(initial=0.0))):
@@ -240,7 +272,7 @@ class InteriorPoint:
             f"the method failed from this start (try another guess)")
 
     def iteration(self, path: Path, it: int):
-        h = self.problem.h
+        h = self.unit
         # before the assembly: the active-set Newton assembles in the same buffers
         finished = self._identified(path, self.xtol * (1.0 + self.problem.size(path)))
         if finished is not None:
@@ -264,25 +296,28 @@ class InteriorPoint:
                 self.best = (max(error, correction), path, self.s.copy())
             # and every bound holding at path, whatever xtol (barrier.BOUND_TOLERANCE):
             # where one does not, the iteration goes on, its steps cutting c + s
+            unconfirmed = False
             if max(error, correction) <= tolerance and self.bounds_hold():
                 floor = self.rounding_floor(path, kkt)
-                if max(error, correction) + floor <= tolerance:
-                    confirmed = self._confirmed(path, tolerance, correction, floor)
-                    if confirmed is not None:
-                        return confirmed
+                if max(error, correction) + floor > tolerance:
+                    # small by luck against the noise: judged as that sum, and on (from
+                    # the system at path again: the floor assembled another in its place)
+                    self.corrections[-1] += floor
+                    if self.best[1] is path:
+                        self.best = (self.corrections[-1], path, self.best[2])
                     res, ab, bw, _, _ = self.system(path)
                     break
-                # small by luck against the noise: judged as that sum, and on (from the
-                # system at path again: the floor assembled another in its place)
-                self.corrections[-1] += floor
-                if self.best[1] is path:
-                    self.best = (self.corrections[-1], path, self.best[2])
+                confirmed = self._confirmed(path, tolerance, correction, floor)
+                if confirmed is not None:
+                    return confirmed
+                # unconfirmed, the estimate stands only below μ = xtol: μ falls (from
+                # the system at path again: the active-set Newton assembled in its place)
+                unconfirmed = True
                 res, ab, bw, _, _ = self.system(path)
-                break
             # μ falls once its barrier problem is solved, and only while its bias (the
             # μ = 0 correction beyond the barrier problem's own) exceeds the tolerance:
             # a smaller μ only adds rounding (Σ = z/s grows as 1/μ on active rows)
-            biased = correction - error > tolerance / 2
+            biased = correction - error > tolerance / 2 or unconfirmed
             self.node_correction = float(np.abs(delta[self.nodes]).max(initial=0.0))
             solved = self._barrier_solved(res, bw, path, error, tolerance)
             if not solved or self.mu <= self.floor or not biased:
@@ -323,14 +358,17 @@ class InteriorPoint:
         xtol = 1e-2 stopped at μ = 0.4 with a correction of 2.0e-2 and was 0.12 from the
         optimum (3–5× its estimate for xtol 1e-2 … 1e-3). So the active-set Newton of
         :mod:`.polish` finishes from it — two corrections in a row within the tolerance,
-        quadratic convergence shown — and where it cannot, the interior point goes on;
-        its own estimate stands alone only where the active-set Newton is unavailable
-        (gauged constraints), and then only with μ at its floor, in the quadratic
-        regime."""
-        finished = self.finish(path, tolerance)
+        quadratic convergence shown. Where it cannot (gauged constraints; a degenerate
+        active set: the double integrator's minimum time from States, two windows at the
+        switch 2e-8 inside their bounds with multipliers near 0), the interior point's own
+        estimate stands once μ is below xtol: the iterate is then within O(μ) of the KKT
+        point, and the linearisation's error second order in that. Else it goes on."""
+        # once per path: at the next μ the same iterate needs only the μ test
+        finished = None if path is self._unconfirmed else self.finish(path, tolerance)
         if finished is not None:
             return finished[0], Status.SUCCESS, f" (finished from its last iterate){finished[1]}"
-        if self.problem.gauge is None or self.mu > self.floor:
+        self._unconfirmed = path
+        if self.mu > self.xtol:
             return None
         return path, Status.SUCCESS, (
             f"; Newton correction of the KKT system (μ = 0) {correction:.1e}, rounding "
@@ -357,12 +395,12 @@ class InteriorPoint:
         N = 1000 went from μ = 100 to 0.032 in two iterations with a dual residual of 60,
         and crept at steps α ≈ 0.05 cut by the fraction to the boundary for 90
         iterations. The residuals are measured above their rounding level
-        (:func:`.newton.rounding_level` of W, assembled at ``path``): at N = 1000 the
+        (:func:`.band.rounding_level` of W, assembled at ``path``): at N = 1000 the
         cart-pole's barrier problem converged in its nodes with a node residual of 0.05,
         its rounding, and μ = 0.1 never fell."""
-        h = self.problem.h
+        h = self.unit
         c, z = self.inequalities.values, self.z(path)
-        level = rounding_level(self.model, self.hessian, bw, self.problem.magnitudes(path))
+        level = self.problem.rounding_level(self.hessian, bw, path)
         dual = max(0.0, float(np.abs(res).max(initial=0.0)) - level)
         return max(dual / h,
                    float(np.abs(c + self.s).max(initial=0.0)),
@@ -477,7 +515,7 @@ class InteriorPoint:
         its Cholesky factorisation is rounding. SUCCESS, or SADDLE."""
         _, ab, bw, finite = self.problem.assemble(path, True)
         active = (self.z(path) > self.s).astype(float)
-        scale = float(np.abs(ab[2 * bw][self.nodes]).max(initial=0.0))
+        scale = float(np.abs(ab[2 * bw][self.nodes[:ab.shape[1]]]).max(initial=0.0))
         verdict = None
         for rho in PENALTIES if finite else ():
             verdict = self.curvature(path, ab, bw, active * rho * scale / self.squared_gradients())
@@ -498,10 +536,22 @@ class InteriorPoint:
         (band storage, left intact) and G the inequalities' gradients at ``path``."""
         problem, work = self.problem, np.array(hessian, order="F")
         weight = np.ascontiguousarray(weight)
-        self.inequalities.add_barrier(path, problem.p, problem.h, weight,
+        self.inequalities.add_barrier(path, problem.p, problem.step(path), weight,
                                       np.ones_like(weight), 0.0, np.zeros(work.shape[1]), work)
-        work[2 * bw] += shift * self.nodes
-        return second_order(work, bw, self.rows, lambda: cholesky_pivot(self.model, work, bw))
+        band = work.shape[1]
+        work[2 * bw] += shift * self.nodes[:band]
+        verdict = second_order(work, bw, self.rows[:band],
+                               lambda: cholesky_pivot(self.model, work, bw))
+        rates = problem.inequality_rates(path)
+        if not verdict.minimum or rates is None:
+            return verdict
+        # a free horizon: the bordered matrix's inertia is the band's and the sign of its
+        # Schur complement (Haynsworth), the border W's plus the weighted inequalities'
+        b, d = problem.raw
+        column = b + self.inequalities.transposed(weight * rates, self.blocks, self.width)
+        schur = problem.schur_with(work, bw, column, d + float((weight * rates ** 2).sum())
+                                   + shift)
+        return verdict if schur > 0 else Curvature(False, verdict.rho, schur)
 
     def squared_gradients(self) -> np.ndarray:
         """|∇c_j|² per window and inequality: the penalties on the active ones are
@@ -536,10 +586,10 @@ class InteriorPoint:
         every inequality within :data:`.barrier.BOUND_TOLERANCE` of its scale, else
         ILL_CONDITIONED with the violation (the phases accept no such path; this is the
         last line against a false SUCCESS)."""
-        finite = self.inequalities.evaluate(path, self.problem.p, self.problem.h)
+        finite = self.inequalities.evaluate(path, self.problem.p, self.problem.step(path))
         if finite and self.bounds_hold():
             return Status.SUCCESS, message
-        where = self.inequalities.describe_violation(self.problem.h) if finite else \
+        where = self.inequalities.describe_violation(self.problem.step(path)) if finite else \
             "an inequality is not finite"
         return Status.ILL_CONDITIONED, (
             f"converged within the tolerance{message}, but at the path returned {where}, "
@@ -550,7 +600,7 @@ class InteriorPoint:
         """The :class:`BVPResult` of the solve, with the bound multipliers, the active
         set and the iteration history."""
         model, problem = self.model, self.problem
-        h, p, s_count = problem.h, problem.p, self.s_count
+        h, p, s_count = problem.step(path), problem.p, self.s_count
         N = path.x.shape[0] - 1
         if status == Status.SUCCESS:
             status, message = self._bounds_verified(path, message)

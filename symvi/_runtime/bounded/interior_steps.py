@@ -32,9 +32,9 @@ SHORT = 2.0**-8
 def merit(ip, path: Path, s: np.ndarray, nu: float) -> float:
     """The barrier problem's ℓ1 exact penalty S − μh Σ log s + ν(‖Φ_d‖₁ + ‖c + s‖₁)."""
     problem = ip.problem
-    if not ip.inequalities.evaluate(path, problem.p, problem.h):
+    if not ip.inequalities.evaluate(path, problem.p, problem.step(path)):
         return np.inf
-    value = problem.merit(path)[0] - ip.mu * problem.h * float(np.log(s).sum()) \
+    value = problem.merit(path)[0] - ip.mu * ip.unit * float(np.log(s).sum()) \
         + nu * float(np.abs(ip.inequalities.values + s).sum())
     if ip.rows.any():
         res, _, _, finite = problem.assemble(path, False)
@@ -54,7 +54,7 @@ def step(ip, path: Path, res, ab, bw: int, delta, ds, dz, Gd, error: float,
     found it (:func:`.filter_steps.filter_step`)."""
     from scipy.linalg import LinAlgError
 
-    problem, mu = ip.problem, ip.mu * ip.problem.h
+    problem, mu = ip.problem, ip.mu * ip.unit
     c, nodes = ip.inequalities.values.copy(), ip.nodes
     scale = ip.scale
     if shift is None:
@@ -86,7 +86,7 @@ def _backtrack(ip, path: Path, ab, bw: int, delta, ds, dz, Gd, c, shift: float,
     """Armijo backtracking on :func:`merit` from the fraction-to-the-boundary step down
     to ``min_alpha``, if ``delta`` is a descent direction with positive curvature; else
     None."""
-    problem, mu = ip.problem, ip.mu * ip.problem.h
+    problem, mu = ip.problem, ip.mu * ip.unit
     rows, nodes = ip.rows, ip.nodes
     z, s = ip.z(path).copy(), ip.s
     lam, phi_d = problem.multipliers(path), ip.stencil[rows]
@@ -125,7 +125,7 @@ def reset(ip, trial: Path, s: np.ndarray, stepped: np.ndarray, tau: float):
     −μh log(−c) instead, and the same solve reached μ = 6.4e-6 in 12 iterations (a slack
     reset, as in Byrd, Nocedal & Waltz's KNITRO)."""
     problem = ip.problem
-    if not ip.inequalities.evaluate(trial, problem.p, problem.h):
+    if not ip.inequalities.evaluate(trial, problem.p, problem.step(trial)):
         return None
     exact = -ip.inequalities.values
     return np.where(exact >= (1.0 - tau) * s, exact, stepped)
@@ -139,11 +139,11 @@ def _kkt_norm(ip, path: Path, s: np.ndarray, c: np.ndarray | None = None) -> flo
     problem = ip.problem
     res, _, _, finite = problem.assemble(path, False)
     if c is None:
-        finite = finite and ip.inequalities.evaluate(path, problem.p, problem.h)
+        finite = finite and ip.inequalities.evaluate(path, problem.p, problem.step(path))
         c = ip.inequalities.values
     if not finite:
         return np.inf
-    parts = (res, (c + s).ravel(), (s * ip.z(path) - ip.mu * problem.h).ravel())
+    parts = (res, (c + s).ravel(), (s * ip.z(path) - ip.mu * ip.unit).ravel())
     return float(np.sqrt(sum(float(dnrm2(v)) ** 2 for v in parts)))
 
 
@@ -173,7 +173,7 @@ def _natural(ip, path: Path, ab, bw: int, delta, ds, dz, error: float):
     """The full step (to the boundary) if the correction the same reduced matrix gives
     at the moved path is smaller than ``error``, the one it makes: Deuflhard's natural
     monotonicity test, which needs no merit function. Else None."""
-    problem, h = ip.problem, ip.problem.h
+    problem, h = ip.problem, ip.unit
     tau = max(TAU_MIN, 1.0 - ip.mu)
     alpha, z = boundary_step(ip.s, ds, tau), ip.z(path).copy()
     trial = problem.moved(path, delta, alpha)
@@ -182,8 +182,7 @@ def _natural(ip, path: Path, ab, bw: int, delta, ds, dz, error: float):
     s = ip.s + alpha * ds
     trial.lam[:, ip.s_count:] = safeguarded(z + boundary_step(z, dz, tau) * dz, s, ip.mu * h)
     res, _, _, finite = problem.assemble(trial, False)
-    finite = finite and ip.inequalities.add_barrier(
-        trial, problem.p, h, ip.z(trial), s, ip.mu * h, res, None)
+    finite = finite and ip.reduce(trial, s, res)
     if not finite:
         return None
     simplified = problem.solve(ab, bw, -res)
@@ -198,6 +197,6 @@ def accept(ip, trial: Path, s: np.ndarray, z, dz, alpha_z: float, alpha: float) 
     """``trial`` with the slacks ``s`` and the multipliers z + α_z Δz (safeguarded) set,
     the step α recorded."""
     ip.s = s
-    trial.lam[:, ip.s_count:] = safeguarded(z + alpha_z * dz, s, ip.mu * ip.problem.h)
+    trial.lam[:, ip.s_count:] = safeguarded(z + alpha_z * dz, s, ip.mu * ip.unit)
     ip.log.step(alpha=alpha)
     return trial

@@ -61,6 +61,15 @@ class Problem:
         #: then estimates no error
         self.held = False
 
+    def step(self, path: Path) -> float:
+        """The step h of ``path`` (the problem's; a free horizon's follows the path)."""
+        return self.h
+
+    def inequality_rates(self, path: Path) -> np.ndarray | None:
+        """∂c/∂T per window and inequality at fixed elements, where the horizon T is an
+        unknown (:mod:`.bordered`); None here."""
+        return None
+
     def merit(self, path: Path) -> tuple[float, float]:
         """The cost S = Σ L_d and the size of its rounding error."""
         terms = self.model.along_vector(Kernel.LAGRANGIAN, path.x, path.f, self.h, self.p)

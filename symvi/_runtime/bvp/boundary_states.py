@@ -70,10 +70,6 @@ def check_supported(model) -> None:
     if model.end_free or model.end_count:
         raise ValueError(f"model {name!r}: its end is free or given by end conditions; give "
                          f"the start as nodes (a State fixes both ends)")
-    if model.info.free_horizon and model.inequalities:
-        raise ValueError(f"model {name!r}: with a free final time and inequalities the "
-                         f"boundary data are nodes; States fix the horizon's ends at t = 0 "
-                         f"and t = T only without inequalities so far")
 
 
 def element_nodes(model, state: State, h: float, what: str):

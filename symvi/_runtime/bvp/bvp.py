@@ -83,7 +83,10 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
         (from States: N + 1 states t_k = k·h on [0, T], N + 1 elements, N + 2 nodes).
     h, T : the step h, or the horizon T = N·h (keyword; give one of them). With a free
         horizon (``optimal_control(..., time_cost=ρ)``) the first guess of it, the
-        result's ``T`` (``t[-1]``) the optimal horizon (:mod:`.horizon`).
+        result's ``T`` the optimal horizon: an unknown of the same Newton system
+        (:mod:`.bordered`), with States as boundary data converging at order 2; where
+        that fails with inequalities, an outer iteration of fixed-horizon solves
+        (:mod:`.horizon`) is tried from the start.
     params : parameter overrides (mapping name → value); the others keep the defaults
         compiled in (``INFO.defaults``).
     guess : the free nodes r … N−r in the same layout (from States: nodes 2 … N − 1 of the
@@ -148,10 +151,11 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
         result = fixed_horizon(model, *nodes, N + 1, h, p, guess, options, (start, end))
         solved = info.free_horizon and len(result.t)    # the horizon found, h = T/N
         result = boundary_states.attach(model, result, result.T / (N + 1) if solved else h)
-    elif info.free_horizon and model.inequalities:
+    elif info.free_horizon:
         result = free_horizon(
+            lambda: fixed_horizon(model, start, end, N, h, p, guess, options),
             lambda step, previous: fixed_horizon(model, start, end, N, step, p, (
-                guess if previous is None else previous), options),
+                guess if previous is None else previous), options, horizon=False),
             model, p, N, h, options)
     else:
         result = fixed_horizon(model, start, end, N, h, p, guess, options)
@@ -159,15 +163,16 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
 
 
 def fixed_horizon(model, start, end, N: int, h: float, p, guess,
-                  options: SolveOptions, states=None) -> BVPResult:
+                  options: SolveOptions, states=None, horizon: bool = True) -> BVPResult:
     """The whole-trajectory solve at the step h under ``options``: see :func:`solve_bvp`
     (with inequalities, :func:`.bounded.bounded`). A free horizon without inequalities
     is an unknown of the same Newton system, h its first guess (:mod:`.bordered`);
-    ``states``, the (start, end) States whose elements ``start`` and ``end`` are."""
+    ``states``, the (start, end) States whose elements ``start`` and ``end`` are;
+    ``horizon=False``: a free horizon's model solved at the step h (:mod:`.horizon`)."""
     path = initial_path(model, start, end, N, guess, p, h)
     if isinstance(path, BVPResult):
         return path
-    if model.info.free_horizon and not model.inequalities:
+    if model.info.free_horizon and horizon:
         steps = N - (states is not None)         # h = T/N of the States' grid
         path = replace(path, T=steps * h)
         problem = HorizonProblem(model, p, steps, states)
@@ -177,14 +182,15 @@ def fixed_horizon(model, start, end, N: int, h: float, p, guess,
         # bvp/'s one import of bounded/, made only for a model with inequalities:
         # bounded/ builds on bvp/, and a model without bounds never loads it.
         from ..bounded.barrier import check_boundary_data, check_intervals
-        from ..bounded.bounded import bounded
+        from ..bounded.bounded import bounded, bounded_horizon
         check_intervals(model, path, p, h)
         check_boundary_data(model, path, p, h)
         # a previous result that failed is a guess of nodes only (core.paths.initial_path)
         cold = not (isinstance(guess, BVPResult) and guess.success)
         active = None if cold or guess.active is None \
             or guess.active.shape != path.lam[:, model.constraints:].shape else guess.active
-        return bounded(problem, path, options, cold, active)
+        solve = bounded_horizon if path.T is not None else bounded
+        return solve(problem, path, options, cold, active)
     if model.info.gauges:
         check_boundary(model, path, problem.perturbed(path), p, h)
     path, norms, steps, status, message = newton(problem, path, options)

@@ -44,11 +44,34 @@ def slope(model, result: BVPResult, p) -> float:
     return derivative / N + float(values[0, -1])
 
 
-def free_horizon(solve, model, p, N: int, h: float, options: SolveOptions) -> BVPResult:
-    """Minimise J* + ρT over T from T = N·h under the solve's ``options``. ``solve(h,
-    guess)`` is the fixed-horizon whole-trajectory solve at step h from ``guess`` (a
-    previous result, or None for the solve's own guess), everything else as the solve
-    was asked (:func:`.bvp.fixed_horizon`)."""
+def free_horizon(newton, solve, model, p, N: int, h: float,
+                 options: SolveOptions) -> BVPResult:
+    """Minimise J* + ρT over T from T = N·h under the solve's ``options``: ``newton()``, the
+    solve with T an unknown of its Newton system (:mod:`.bordered`), unless
+    ``options.horizon_method`` is 'secant'; where that fails with inequalities, or with
+    'secant', the outer iteration (:func:`outer`). ``solve(h, guess)`` is the
+    fixed-horizon whole-trajectory solve at step h from ``guess`` (a previous result, or
+    None for the solve's own guess), everything else as the solve was asked
+    (:func:`.bvp.fixed_horizon`)."""
+    if options.horizon_method == "secant":
+        return outer(solve, model, p, N, h, options)
+    first = newton()
+    if first.success or not model.inequalities:
+        return first
+    result = outer(solve, model, p, N, h, options)
+    if result.success:
+        return replace(result, message=(
+            f"{result.message} (the horizon as an unknown of the interior point failed "
+            f"first: {first.status.name}, {first.message})"))
+    # the outer iteration's INFEASIBLE would certify one horizon only (a hunt: a first
+    # guess 0.3 T* at xtol = 1e-3): the free horizon's failure is the first one's
+    return replace(first, message=(
+        f"{first.message}; the outer iteration on T failed too ({result.status.name}: "
+        f"{result.message})"))
+
+
+def outer(solve, model, p, N: int, h: float, options: SolveOptions) -> BVPResult:
+    """The outer iteration of :func:`free_horizon` (module docstring)."""
     xtol = options.xtol
     T, result = N * h, solve(h, None)
     if not result.success:

@@ -247,6 +247,11 @@ class SolveOptions(Options):
         arguments.iterations)
     polish_rounds: int = option(8, (
         "active sets the active-set Newton tries before it gives up"), arguments.iterations)
+    horizon_method: str = option("newton", (
+        "how a free horizon is found: 'newton' (T an unknown of the Newton system; with "
+        "inequalities, where it fails, the outer iteration follows) or 'secant' (the outer "
+        "iteration of fixed-horizon solves alone, from nodes as boundary data)"),
+        lambda value, what: one_of(value, what, ("newton", "secant")))
     horizon_maxiter: int = option(40, (
         "outer (secant) iterations of a free horizon before MAX_ITERATIONS"),
         arguments.iterations)
