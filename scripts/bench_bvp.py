@@ -227,12 +227,12 @@ def increment(g0: np.ndarray, g1: np.ndarray, h: float) -> np.ndarray:
     return np.array([C[2, 1], C[0, 2], C[1, 0]]) / h
 
 
-def casadi_functions(h: float, inertia: np.ndarray, g_last: np.ndarray):
-    """(L_d, step, end, torque) as CasADi SX functions: L_d(ξ_w, ξ_{w+1}) = h·½|τ/I|² with
-    Ω = (ξ_w+ξ_{w+1})/2, Ω̇ = (ξ_{w+1}−ξ_w)/h, τ = IΩ̇ + Ω×IΩ (paper eq. ``sdfinal``, ERRATA
-    1–3); step(g, ξ) = g cay(hξ̂) (g as 9 column-major entries); end(g) = vee
-    cay⁻¹(g_{N−1}ᵀ g); torque(ξ_w, ξ_{w+1}) = τ."""
-    a, b, g = ca.SX.sym("a", 3), ca.SX.sym("b", 3), ca.SX.sym("g", 9)
+def timed_casadi_functions(inertia: np.ndarray, g_last: np.ndarray):
+    """(L_d, step, end, torque) as CasADi SX functions with the step h an input:
+    L_d(ξ_w, ξ_{w+1}, h) = h·½|τ/I|² with Ω = (ξ_w+ξ_{w+1})/2, Ω̇ = (ξ_{w+1}−ξ_w)/h,
+    τ = IΩ̇ + Ω×IΩ (paper eq. ``sdfinal``, ERRATA 1–3); step(g, ξ, h) = g cay(hξ̂) (g as 9
+    column-major entries); end(g) = vee cay⁻¹(g_{N−1}ᵀ g); torque(ξ_w, ξ_{w+1}, h) = τ."""
+    a, b, g, h = ca.SX.sym("a", 3), ca.SX.sym("b", 3), ca.SX.sym("g", 9), ca.SX.sym("h")
     omega, rate = (a + b) / 2, (b - a) / h
     tau = inertia * rate + ca.cross(omega, inertia * omega)
     w = h * a
@@ -241,10 +241,20 @@ def casadi_functions(h: float, inertia: np.ndarray, g_last: np.ndarray):
     cay = ca.SX.eye(3) + 4 / (4 + ca.sumsqr(w)) * (w_hat + w_hat @ w_hat / 2)
     W = ca.DM(g_last).T @ ca.reshape(g, 3, 3)
     C = ca.solve(W + ca.SX.eye(3), 2 * (W - ca.SX.eye(3)))
-    return (ca.Function("L_d", [a, b], [h * ca.sumsqr(tau / inertia) / 2]),
-            ca.Function("step", [g, a], [ca.vec(ca.reshape(g, 3, 3) @ cay)]),
+    return (ca.Function("L_d", [a, b, h], [h * ca.sumsqr(tau / inertia) / 2]),
+            ca.Function("step", [g, a, h], [ca.vec(ca.reshape(g, 3, 3) @ cay)]),
             ca.Function("end", [g], [ca.vertcat(C[2, 1], C[0, 2], C[1, 0])]),
-            ca.Function("torque", [a, b], [tau]))
+            ca.Function("torque", [a, b, h], [tau]))
+
+
+def casadi_functions(h: float, inertia: np.ndarray, g_last: np.ndarray):
+    """:func:`timed_casadi_functions` at the step ``h``: (L_d(ξ_w, ξ_{w+1}), step(g, ξ),
+    end(g), torque(ξ_w, ξ_{w+1})), the expressions inlined (SX)."""
+    L_d, step, end, torque = timed_casadi_functions(inertia, g_last)
+    a, b, g = ca.SX.sym("a", 3), ca.SX.sym("b", 3), ca.SX.sym("g", 9)
+    return (ca.Function("L_d", [a, b], [L_d(a, b, h)]),
+            ca.Function("step", [g, a], [step(g, a, h)]), end,
+            ca.Function("torque", [a, b], [torque(a, b, h)]))
 
 
 def ipopt_solver(N: int):

@@ -29,7 +29,7 @@ from typing import Callable
 import casadi as ca
 import numpy as np
 
-from bench_bvp import casadi_functions, increment
+from bench_bvp import casadi_functions, increment, timed_casadi_functions
 
 
 @dataclass
@@ -155,24 +155,6 @@ def slew_stagewise(path, start, end, N, h, inertia, tau_max, omega_max) -> Nlp:
 # minimum_time_slew: spacecraft_slew's torque limits, min Σ L_d + ρT over the increments
 # and T (h = T/N an unknown); rest to rest, so the end increments are 0 whatever h
 # ---------------------------------------------------------------------------------------
-def _timed_functions(inertia: np.ndarray, g_last: np.ndarray):
-    """``bench_bvp.casadi_functions`` with the step h an input: (L_d(a, b, h),
-    step(g, a, h), end(g), torque(a, b, h))."""
-    a, b, g, h = ca.SX.sym("a", 3), ca.SX.sym("b", 3), ca.SX.sym("g", 9), ca.SX.sym("h")
-    omega, rate = (a + b) / 2, (b - a) / h
-    tau = inertia * rate + ca.cross(omega, inertia * omega)
-    w = h * a
-    w_hat = ca.vertcat(ca.horzcat(0, -w[2], w[1]), ca.horzcat(w[2], 0, -w[0]),
-                       ca.horzcat(-w[1], w[0], 0))
-    cay = ca.SX.eye(3) + 4 / (4 + ca.sumsqr(w)) * (w_hat + w_hat @ w_hat / 2)
-    W = ca.DM(g_last).T @ ca.reshape(g, 3, 3)
-    C = ca.solve(W + ca.SX.eye(3), 2 * (W - ca.SX.eye(3)))
-    return (ca.Function("L_d", [a, b, h], [h * ca.sumsqr(tau / inertia) / 2]),
-            ca.Function("step", [g, a, h], [ca.vec(ca.reshape(g, 3, 3) @ cay)]),
-            ca.Function("end", [g], [ca.vertcat(C[2, 1], C[0, 2], C[1, 0])]),
-            ca.Function("torque", [a, b, h], [tau]))
-
-
 def _at_rest(start, end) -> None:
     if not (np.array_equal(start[0], start[1]) and np.array_equal(end[0], end[1])):
         raise ValueError("the minimum-time slew's formulations assume rest-to-rest ends")
@@ -182,7 +164,7 @@ def timed_slew_compact(path, start, end, N, h, inertia, tau_max, rho) -> Nlp:
     """:func:`slew_compact`'s unknowns and T last; cost Σ_w L_d(·, T/N) + ρT; |τ_w| ≤ τ_max
     (the minimum-time slew bounds no rate)."""
     _at_rest(start, end)
-    L_d, step, end_defect, torque = _timed_functions(inertia, end[0])
+    L_d, step, end_defect, torque = timed_casadi_functions(inertia, end[0])
     X, G, T = ca.SX.sym("xi", 3, N - 2), ca.SX.sym("g", 9, N - 3), ca.SX.sym("T")
     hh = T / N
     xi = ca.horzcat(ca.DM.zeros(3, 1), X, ca.DM.zeros(3, 1))
@@ -209,7 +191,7 @@ def timed_slew_stagewise(path, start, end, N, h, inertia, tau_max, rho) -> Nlp:
     FATROP takes a free horizon): state (ξ_k, g_{k+1}, T) (13), control ξ_{k+1}; ρT on
     the last stage; the first state's ξ_0 and g_1 fixed, its T free."""
     _at_rest(start, end)
-    L_d, step, end_defect, torque = _timed_functions(inertia, end[0])
+    L_d, step, end_defect, torque = timed_casadi_functions(inertia, end[0])
     K = N - 2
     S = [ca.SX.sym(f"s{k}", 13) for k in range(K + 1)]
     U = [ca.SX.sym(f"u{k}", 3) for k in range(K)]

@@ -26,7 +26,7 @@ import pytest
 import sympy as sp
 
 import symvi
-from symvi import Model, PairGroupoid
+from symvi import Model, PairGroupoid, State
 from symvi.build import MANIFEST, cache_key, compile_model
 from symvi.errors import CacheWarning
 from symvi.models import BUNDLED, get
@@ -73,8 +73,8 @@ CHILD = textwrap.dedent("""
     import importlib
     mod = importlib.import_module(spec["name"])
     if "start" in spec:   # a whole-trajectory example (optimal control)
-        r = mod.solve_bvp(spec["start"], spec["end"], spec["n_steps"], spec["h"],
-                          guess=spec.get("guess"))
+        ends = [mod.State(**e) if isinstance(e, dict) else e for e in (spec["start"], spec["end"])]
+        r = mod.solve_bvp(*ends, spec["n_steps"], spec["h"], guess=spec.get("guess"))
         final, rows = r.f[-1], r.f.shape[0] + 1
     else:
         initial = spec["initial"]
@@ -92,7 +92,10 @@ CHILD = textwrap.dedent("""
 
 def _as_list(value):
     """Nested arrays (tuples of arrays for (x, g) data) as JSON lists; None (an unknown
-    end) as null."""
+    end) as null; a State as the dict of its fields."""
+    if isinstance(value, State):
+        return {k: _as_list(v) for k, v in (("x", value.x), ("g", value.g), ("v", value.v))
+                if v is not None}
     if isinstance(value, tuple):
         return [_as_list(v) for v in value]
     return None if value is None else np.asarray(value, dtype=float).tolist()
@@ -149,7 +152,8 @@ def test_cli_compile_then_standalone_import_runs_example(build_dir, compiled, na
     assert Path(out["file"]).resolve() == (package / "__init__.py").resolve()
     # Same numbers as the in-process build of the same model (same C source and flags).
     if example.whole_trajectory:
-        assert out["rows"] == example.n_steps + 1
+        # from States, N + 2 nodes (the end elements' midpoints at t = 0 and T)
+        assert out["rows"] == example.n_steps + 1 + isinstance(example.start, State)
         reference = compiled(name).solve_bvp(example.start, example.end, example.n_steps,
                                              example.h).f[-1]
     else:

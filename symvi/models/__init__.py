@@ -24,7 +24,8 @@ NONHOLONOMIC = ("unicycle_parking", "chaplygin_sled", "rolling_coin")
 BUNDLED = ("harmonic_oscillator", "pendulum", "double_pendulum", "robot_arm", "cubic_spline",
            "spline_potential", "so3_cubic", "double_pendulum_oc", "cart_pole_oc",
            "heavy_top_rotors_oc_variational", "spacecraft_slew", "minimum_time_slew",
-           "cart_pole_swing_up", "planar_flyer", "cart_pole_catch") + HIGHER_ORDER + NONHOLONOMIC \
+           "cart_pole_swing_up", "planar_flyer", "cart_pole_catch",
+           "minimum_time_double_integrator") + HIGHER_ORDER + NONHOLONOMIC \
     + tuple(f"{name}{suffix}" for name in _GROUP_MODELS for suffix in ("", "_exp"))
 #: Optimal-control problems (constrained second-order models solved as whole trajectories).
 CONTROL = ("rigid_body_oc", "rigid_body_oc_exp", "heavy_top_rotors_oc",
@@ -32,7 +33,7 @@ CONTROL = ("rigid_body_oc", "rigid_body_oc_exp", "heavy_top_rotors_oc",
            "double_pendulum_oc", "cart_pole_oc")
 #: Optimal-control problems with bounds (inequalities; the interior-point solve).
 BOUNDED = ("spacecraft_slew", "minimum_time_slew", "cart_pole_swing_up", "planar_flyer",
-           "cart_pole_catch")
+           "cart_pole_catch", "minimum_time_double_integrator")
 
 
 def get(name: str) -> Model:
