@@ -265,3 +265,21 @@ def test_loose_tolerances_and_far_first_horizons_are_honest(models, bounded):
             error = max([float(np.abs(a - b).max()) for a, b in
                          zip(unknowns(r), unknowns(best))] + [abs(np.log(r.T / best.T))])
             assert error <= xtol * (1 + size), (first, xtol, error, r.T, best.T)
+
+
+def test_perturbed_starts_go_on_from_the_optimum_without_bounds(models):
+    """Where the interior point from a perturbed guess stalls at μ = 10 (primal
+    infeasibility 4 on a double integrator with |u| ≤ 0.5 between moving ends, first
+    horizon 10 T*), the solve goes on from the optimum without bounds — T free there too
+    — and ends at the optimum the unperturbed start finds (path and T to the
+    tolerance)."""
+    N, params = 30, dict(epsilon=0.01, u_max=0.5)
+    ends = (np.array([[0.0], [0.02]]), np.array([[0.98], [1.0]]))
+    best = models["bounded"].solve_bvp(*ends, N, T=2.0, params=params, xtol=1e-12)
+    assert best.success, best.message
+    rng = np.random.default_rng(0)
+    for _ in range(3):
+        guess = best.x[2:-2] + 0.3 * rng.standard_normal((N - 3, 1))
+        r = models["bounded"].solve_bvp(*ends, N, T=10 * best.T, params=params, guess=guess)
+        assert r.success, r.message
+        assert abs(np.log(r.T / best.T)) <= 1e-8 and np.abs(r.x - best.x).max() <= 1e-8

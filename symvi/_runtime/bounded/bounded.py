@@ -78,17 +78,32 @@ def bounded_horizon(problem, path: Path, options: SolveOptions, cold: bool,
     :class:`.bordered.HorizonProblem`): the warm start's active-set Newton, then the
     interior point from the guess — not the penalty phases, which hold the horizon, and
     whose certificate of infeasibility would be one for this horizon only (a horizon too
-    short for the bounds is lengthened, not INFEASIBLE: issue 50). Its failure is the
-    caller's to answer (:func:`.bvp.solve_bvp`: the outer iteration on T)."""
+    short for the bounds is lengthened, not INFEASIBLE: issue 50) — and, where it stalls or
+    runs out of iterations from a cold start, again from the optimum without bounds. Its
+    failure is the caller's to answer (:func:`.bvp.solve_bvp`: the outer iteration on
+    T)."""
     options = options.replace(ftol=0.0)
     if active is not None:
         warm = _warm(problem, path, active, options)
         if warm is not None:
             return warm
     ip, end, iterations, status, message = _interior(problem, path, options, near=not cold)
+    phase = "interior point from the guess"
+    if status in FAILED and cold:
+        # as bounded()'s: from the optimum without bounds, T free there too (perturbed
+        # starts of the double integrator stalled at μ = 10, primal infeasibility 4–240)
+        near = options.replace(mu_start=min(options.mu_start, NEAR_MU))
+        optimum, first, _ = unbounded(problem, path, near)
+        if optimum is not None:
+            retry = _interior(problem, optimum, near, near=True)
+            if retry[3] not in FAILED:
+                spent = iterations + first
+                ip, end, iterations, status, message = retry
+                iterations += spent
+                phase = (f"after the interior point from the guess failed, from the optimum "
+                         f"without bounds ({first} Newton iterations), interior point")
     if status == Status.SUCCESS:
-        message = f"interior point from the guess, the horizon an unknown: {iterations} " \
-                  f"iterations{message}"
+        message = f"{phase}, the horizon an unknown: {iterations} iterations{message}"
     return ip.result(end, iterations, status, f"{message}; free horizon T = {end.T:.12g}")
 
 

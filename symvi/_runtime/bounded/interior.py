@@ -59,6 +59,11 @@ from ..core.results import BVPResult, Status
 #: N = 150 from the chord guess, a saddle of cost 32.3576 with reduced eigenvalue −0.197
 #: accepted; capped, the solve goes on to the minimum 32.3515, smallest eigenvalue +4.4).
 PENALTIES, CAP = (0.0, 1.0, 1e2), 1e6
+#: An interior-point estimate the active-set Newton did not confirm counts only this many
+#: times within the tolerance (:meth:`InteriorPoint._confirmed`): a hunt met one at 0.95
+#: of the tolerance whose path was 1.0 of it off (the horizon of a double integrator
+#: with moving ends at xtol = 1e-2).
+UNCONFIRMED = 2.0
 #: The largest relative tolerance whose stalled corrections can be rounding's
 #: (:meth:`InteriorPoint._stagnant`): stalls are judged against 10⁴ times the smaller of
 #: it and the tolerance asked.
@@ -361,14 +366,15 @@ class InteriorPoint:
         quadratic convergence shown. Where it cannot (gauged constraints; a degenerate
         active set: the double integrator's minimum time from States, two windows at the
         switch 2e-8 inside their bounds with multipliers near 0), the interior point's own
-        estimate stands once μ is below xtol: the iterate is then within O(μ) of the KKT
-        point, and the linearisation's error second order in that. Else it goes on."""
+        estimate stands once μ is below xtol and it is within half the tolerance
+        (:data:`UNCONFIRMED`): the iterate is then within O(μ) of the KKT point, and the
+        linearisation's error second order in that. Else it goes on."""
         # once per path: at the next μ the same iterate needs only the μ test
         finished = None if path is self._unconfirmed else self.finish(path, tolerance)
         if finished is not None:
             return finished[0], Status.SUCCESS, f" (finished from its last iterate){finished[1]}"
         self._unconfirmed = path
-        if self.mu > self.xtol:
+        if self.mu > self.xtol or UNCONFIRMED * (correction + floor) > tolerance:
             return None
         return path, Status.SUCCESS, (
             f"; Newton correction of the KKT system (μ = 0) {correction:.1e}, rounding "

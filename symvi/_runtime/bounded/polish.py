@@ -27,7 +27,12 @@ unknown moves by one unit in the last place, over three random directions), ever
 active multiplier z ≥ 0 and every dropped inequality c ≤ that tolerance times
 min(1, ‖∇c‖). Anything else — a wrong active set, dependent active constraints,
 corrections that wander with rounding — returns None and leaves the interior point's
-verdict. (Those three safeguards answer false successes found by a hunt: a keep-out
+verdict. At a vertex — more active rows than the nodes they fix, dependent, the KKT matrix
+exactly singular (the double integrator's minimum time at even N, every window on its
+bound) — the active row of least multiplier is dropped once: it holds as an equality
+anyway, and the multipliers returned are then one point of a family, all within the
+tolerance of KKT (the path and horizon are unique: the same to 1e-16 from every start).
+(Those three safeguards answer false successes found by a hunt: a keep-out
 disc of radius 0.01 dropped while violated by 3e-9, its node 60 tolerances from the
 optimum; and the cart-pole's multipliers of two adjacent track windows 4 tolerances
 from the KKT point, accepted on one lucky correction and one lucky floor.)
@@ -54,6 +59,10 @@ from ..bvp.newton import NOISE
 SAMPLES = 3
 
 
+class Dependent(Exception):
+    """The active-set KKT matrix is exactly singular: dependent active constraints."""
+
+
 def polish(ip, path: Path, tolerance: float, active: np.ndarray | None = None):
     """(path, slacks, message, Newton steps) of the active-set Newton from the interior
     point ``ip``'s ``path`` (module docstring), starting with the inequalities ``active``
@@ -62,9 +71,20 @@ def polish(ip, path: Path, tolerance: float, active: np.ndarray | None = None):
     if ip.problem.gauge is not None:
         return None     # replaced rows of exactly dependent constraints: not this system
     active = (ip.z(path) > ip.s) if active is None else active
-    total, single = 0, None
+    total, single, weakest = 0, None, True
     for _ in range(ip.options.polish_rounds):
-        converged = _newton(ip, path, active, tolerance)
+        try:
+            converged = _newton(ip, path, active, tolerance)
+        except Dependent:
+            converged = None
+            if single is None and weakest:
+                # a vertex: the double integrator's minimum time at even N, every window
+                # on its bound and one row too many — without the row of least
+                # multiplier, which then holds as an equality anyway
+                single = active.copy()
+                z = np.where(active, ip.z(path), np.inf)
+                single[np.unravel_index(int(np.argmin(z)), active.shape)] = False
+                weakest = False
         if converged is None:
             if single is None:
                 return None
@@ -159,7 +179,7 @@ def _correction(ip, path: Path, active: np.ndarray):
     try:
         lu = splu(K)
     except RuntimeError:        # exactly singular: dependent active constraints
-        return None
+        raise Dependent from None
 
     def solve(rhs: np.ndarray) -> np.ndarray:
         x = lu.solve(rhs)

@@ -228,7 +228,8 @@ class HorizonProblem(Problem):
         return res, ab, bw, finite
 
     def _differences(self, path: Path, res: np.ndarray):
-        """(b, d): the central differences in T of R and G at fixed elements."""
+        """(b, d): the central differences in T of R and G at fixed elements; None where
+        they are not finite (a wild trial path)."""
         step = DIFFERENCE * path.T
         sides = []
         for T in (path.T + step, path.T - step):
@@ -239,7 +240,10 @@ class HorizonProblem(Problem):
             other, _, _, _ = Problem.assemble(self, moved, False)
             sides.append(np.append(other, self.horizon_gradient(moved)))
         self._at(path)
-        column = (sides[0] - sides[1]) / (2 * step)
+        with np.errstate(over="ignore", invalid="ignore"):
+            column = (sides[0] - sides[1]) / (2 * step)
+        if not np.isfinite(column).all():
+            return None
         return column[:-1], float(column[-1])
 
     def solve(self, ab, bw: int, rhs: np.ndarray, shift: float = 0.0,
