@@ -283,3 +283,12 @@ def test_perturbed_starts_go_on_from_the_optimum_without_bounds(models):
         r = models["bounded"].solve_bvp(*ends, N, T=10 * best.T, params=params, guess=guess)
         assert r.success, r.message
         assert abs(np.log(r.T / best.T)) <= 1e-8 and np.abs(r.x - best.x).max() <= 1e-8
+
+
+def test_verbose_shows_the_horizon(models, capsys):
+    """``verbose=True``: each Newton iteration's line carries T (after its step) where it
+    is an unknown."""
+    r = models["di"].solve_bvp(*REST, 50, T=1.0, verbose=True)
+    lines = [ln for ln in capsys.readouterr().err.splitlines() if "Newton iteration" in ln]
+    assert r.success and len(lines) == r.iterations
+    assert all(", T " in ln for ln in lines) and f"T {r.T:.10g}: SUCCESS" in lines[-1]

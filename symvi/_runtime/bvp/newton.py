@@ -42,7 +42,7 @@ def newton(problem, state, options: SolveOptions, phase: str = "whole trajectory
             return state, norms, steps, Status.SINGULAR_JACOBIAN, (
                 f"singular Newton matrix at iteration {it} ({exc})")
         if options.verbose:
-            _report(phase, it, norms, corrections, taken, status)
+            _report(phase, it, norms, corrections, taken, status, state.T)
         if taken is not None:
             steps.append(taken)
         if status is not None:
@@ -56,14 +56,17 @@ def newton(problem, state, options: SolveOptions, phase: str = "whole trajectory
             f"Newton's method did not converge in {maxiter} iterations")
 
 
-def _report(phase: str, it: int, norms: list, corrections: list, taken, status) -> None:
+def _report(phase: str, it: int, norms: list, corrections: list, taken, status,
+            horizon: float | None) -> None:
     """One line of ``verbose``: the iteration's residual norm, its full Newton
-    correction, the step taken and the verdict, if any."""
+    correction, the step taken, the horizon where it is an unknown, and the verdict, if
+    any."""
     correction = f", correction {corrections[-1]:.3e}" if len(corrections) == it + 2 else ""
     step = f", step {taken:.3g}" if taken is not None else ", no step"
+    T = f", T {horizon:.10g}" if horizon is not None else ""
     verdict = f": {status.name}" if status is not None else ""
     print(f"symvi: {phase}: Newton iteration {it}: residual {norms[-1]:.3e}{correction}{step}"
-          f"{verdict}", file=sys.stderr, flush=True)
+          f"{T}{verdict}", file=sys.stderr, flush=True)
 
 
 def _residual_norm(problem, state, with_jacobian: bool = False) -> float:
