@@ -4,7 +4,8 @@ of the whole-trajectory system, bordering its band.
 With h = T/N, the stationarity of ℒ = Σ_w [L_d + λ·Φ_d] + ν·ψ + ρT in T is one more
 equation, G = ∂ℒ/∂T = (1/N) Σ_w ∂ℒ_w/∂h + ρ = 0, the derivatives at fixed groupoid
 elements (the compiled ``horizon`` kernel, by the envelope theorem the dJ*/dT + ρ of the
-outer iteration this replaces, :mod:`.horizon`). Its Newton system borders the band,
+outer iteration, :mod:`.horizon`, now an option and a fallback). Its Newton system
+borders the band,
 
     [ J   b ] [Δ ]     [ R ]
     [ bᵀ  d ] [ΔT] = − [ G ],
@@ -30,11 +31,12 @@ T, the elements held (a group fibre ξ = τ⁻¹(w)/h rescaled by T_old/T_new), 
 derivatives are taken.
 
 With inequalities the interior point (:mod:`.bounded.interior`) eliminates their slacks
-and multipliers into the border too — GᵀΣg_T into b, g_TᵀΣg_T into d, g_T = ∂c/∂T
-(:meth:`HorizonProblem.inequality_rates`) — and the active-set Newton (:mod:`.bounded.polish`)
-borders its sparse KKT matrix the same way. The minimum-time slew on SO(3) finds the
-outer secant's horizon to 12 digits, 2.4× faster at N = 400; the double integrator with
-|u| ≤ 1 converges from first horizons T*/2 and 3T* alike, for time weights ρ/ε to 10⁴.
+and multipliers into the border too — GᵀΣg_σ into b, g_σᵀΣg_σ into d, g_σ = ∂c/∂σ
+(:meth:`HorizonProblem.inequality_rates`) — and the active-set Newton
+(:mod:`.bounded.polish`) borders its sparse KKT matrix the same way. The minimum-time
+slew on SO(3) finds the outer secant's horizon to 12 digits, 2.4× faster at N = 400; the
+double integrator with |u| ≤ 1 converges from first horizons T*/10 to 3T* alike, for
+time weights ρ/ε to 10⁴.
 
 With States as boundary data (:mod:`.boundary_states`) the fixed end elements are the
 ones whose midpoints the States are, at h = T/N: they move with T (unless the States are
@@ -70,6 +72,9 @@ class HorizonProblem(Problem):
         #: h = T/N; with ``states`` (the (start, end) States) the path has N + 2 nodes
         self.N, self.states = N, states
         self.border = None      # (b, d) at the last assembly with a Jacobian
+        #: the border of W itself at that assembly, before an interior point adds its
+        #: barrier's (:meth:`add_to_border`)
+        self.raw = None
         self._column = None     # (shift, J⁻¹b) of the last factorisation
 
     def _at(self, path: Path) -> None:
@@ -220,9 +225,8 @@ class HorizonProblem(Problem):
             border = self._differences(path, res) if finite else None
             if border is not None:      # ∂/∂σ = T ∂/∂T: b_σ = T b, d_σ = T G + T² d
                 border = (path.T * border[0], path.T * G + path.T ** 2 * border[1])
-            self.border, self._column = border, None
-            #: the border of W itself, before an interior point adds its barrier's
-            self.raw = self.border
+            self.border = self.raw = border
+            self._column = None
             finite = finite and self.border is not None
             self._last = (path, (res, ab, bw, finite))
         return res, ab, bw, finite
