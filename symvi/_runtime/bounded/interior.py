@@ -143,7 +143,7 @@ class InteriorPoint:
         self.scale = float(np.abs(ab[2 * bw][self.nodes[:ab.shape[1]]]).max(initial=0.0))
         self.hessian = np.array(ab, order="F")      # W, before the barrier adds GᵀΣG
         self.rates = self.problem.inequality_rates(path)
-        finite = finite and self.reduce(path, self.s, res, ab)
+        finite = finite and self.reduce(path, self.s, res, self.rates, ab)
         if finite and self.rates is not None:
             # the horizon's column of the same elimination: GᵀΣg_T and g_TᵀΣg_T
             sigma = self.z(path) / self.s
@@ -152,16 +152,17 @@ class InteriorPoint:
                 float((sigma * self.rates ** 2).sum()))
         return (res, ab, bw, dual, eq) if finite else None
 
-    def reduce(self, path: Path, s: np.ndarray, res: np.ndarray, ab=None) -> bool:
+    def reduce(self, path: Path, s: np.ndarray, res: np.ndarray, rates: np.ndarray | None,
+               ab=None) -> bool:
         """Add the eliminated slack and multiplier steps at ``path`` (slacks ``s``) to
         the residual ``res`` (and the band ``ab``, unless None) assembled there: Gᵀ(zc +
-        μ)/s, and g_Tᵀ(zc + μ)/s on the horizon's row where T is an unknown (g_T =
-        ∂c/∂T at fixed elements); whether everything is finite."""
+        μ)/s, and g_σᵀ(zc + μ)/s on the horizon's row where T is an unknown (``rates``,
+        g_σ = ∂c/∂σ at ``path``: :meth:`.bordered.HorizonProblem.inequality_rates`);
+        whether everything is finite."""
         z, mu = self.z(path), self.mu * self.unit
         if not self.inequalities.add_barrier(path, self.problem.p, self.problem.step(path),
                                              z, s, mu, res, ab):
             return False
-        rates = self.problem.inequality_rates(path)
         if rates is not None:
             res[-1] += float((rates * (z * self.inequalities.values + mu) / s).sum())
         return bool(np.isfinite(res[-1]))
@@ -522,9 +523,10 @@ class InteriorPoint:
         _, ab, bw, finite = self.problem.assemble(path, True)
         active = (self.z(path) > self.s).astype(float)
         scale = float(np.abs(ab[2 * bw][self.nodes[:ab.shape[1]]]).max(initial=0.0))
-        verdict = None
+        verdict, rates = None, self.problem.inequality_rates(path)
         for rho in PENALTIES if finite else ():
-            verdict = self.curvature(path, ab, bw, active * rho * scale / self.squared_gradients())
+            verdict = self.curvature(path, ab, bw, active * rho * scale / self.squared_gradients(),
+                                     rates)
             if verdict.minimum:
                 return Status.SUCCESS, message
         pivot = "" if verdict is None else f" (Cholesky pivot {verdict.pivot:.1e})"
@@ -535,11 +537,13 @@ class InteriorPoint:
             f"another guess")
 
     def curvature(self, path: Path, hessian, bw: int, weight: np.ndarray,
-                  shift: float = 0.0) -> Curvature:
+                  rates: np.ndarray | None, shift: float = 0.0) -> Curvature:
         """The second-order test (:func:`.optimality.second_order`: positive definite
         on the equalities' tangent space, by Debreu's lemma) of W + Gᵀ diag(weight) G +
         shift·I on the node corrections, W the Hessian of the Lagrangian in ``hessian``
-        (band storage, left intact) and G the inequalities' gradients at ``path``."""
+        (band storage, left intact) and G the inequalities' gradients at ``path``; with a
+        free horizon, ``rates`` the inequalities' g_σ there (else None) and the border
+        of the last assembly, at ``path``, W's."""
         problem, work = self.problem, np.array(hessian, order="F")
         weight = np.ascontiguousarray(weight)
         self.inequalities.add_barrier(path, problem.p, problem.step(path), weight,
@@ -548,7 +552,6 @@ class InteriorPoint:
         work[2 * bw] += shift * self.nodes[:band]
         verdict = second_order(work, bw, self.rows[:band],
                                lambda: cholesky_pivot(self.model, work, bw))
-        rates = problem.inequality_rates(path)
         if not verdict.minimum or rates is None:
             return verdict
         # a free horizon: the bordered matrix's inertia is the band's and the sign of its
@@ -582,7 +585,8 @@ class InteriorPoint:
         weight = np.minimum(self.z(path) / self.s, CAP * self.scale / self.squared_gradients())
         shift = start
         while shift <= MAX_SHIFT:
-            if self.curvature(path, self.hessian, bw, weight, shift * self.scale).minimum:
+            if self.curvature(path, self.hessian, bw, weight, self.rates,
+                              shift * self.scale).minimum:
                 return shift
             shift = next_shift(shift, self.first_shift)
         return np.inf

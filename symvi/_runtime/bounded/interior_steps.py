@@ -182,7 +182,7 @@ def _natural(ip, path: Path, ab, bw: int, delta, ds, dz, error: float):
     s = ip.s + alpha * ds
     trial.lam[:, ip.s_count:] = safeguarded(z + boundary_step(z, dz, tau) * dz, s, ip.mu * h)
     res, _, _, finite = problem.assemble(trial, False)
-    finite = finite and ip.reduce(trial, s, res)
+    finite = finite and ip.reduce(trial, s, res, problem.inequality_rates(trial))
     if not finite:
         return None
     simplified = problem.solve(ab, bw, -res)

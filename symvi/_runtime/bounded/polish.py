@@ -157,7 +157,8 @@ def _newton(ip, path: Path, active: np.ndarray, tolerance: float):
 def _correction(ip, path: Path, active: np.ndarray):
     """(Δ in the block layout, Δz of the active rows, solve) of the active-set Newton step
     at ``path`` — ``solve(rhs)`` applies the factorised matrix's inverse, refined once —
-    or None where something is not finite or the matrix is singular."""
+    or None where something is not finite; :class:`Dependent` where the matrix is
+    exactly singular."""
     from scipy.sparse import bmat, csr_matrix, dia_matrix, hstack
     from scipy.sparse.linalg import splu
 

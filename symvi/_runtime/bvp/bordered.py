@@ -340,7 +340,3 @@ class HorizonProblem(Problem):
 
     def constraint_rows(self, path: Path) -> np.ndarray:
         return np.append(super().constraint_rows(path), False)
-
-    def perturbed(self, path: Path) -> Path:
-        self._at(path)
-        return super().perturbed(path)
