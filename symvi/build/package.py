@@ -89,6 +89,7 @@ def info(dm: DerivedModel, key: str, description: str) -> ModelInfo:
         controls=dm.control_count, inequalities=tuple(dm.inequality_names),
         boundary_inequalities=tuple(dm.boundary_names), intervals=tuple(dm.intervals),
         free_horizon=any(k.name == Kernel.HORIZON.value for k in dm.kernels),
+        pure_minimum_time=dm.pure_minimum_time,
         step_scaled=tuple(dm.step_scaled), symmetries=tuple(dm.symmetries),
         gauges=tuple(dm.gauges),
         groups=tuple(GroupInfo(label=G.label, matrix_dim=G.matrix_dim,

@@ -40,6 +40,8 @@ from ..errors import ModelError
 from .report import CheckResult
 
 NAME = "consistency"
+#: Of the Lagrangian's step map: skipped in pure minimum time (:mod:`.runner`).
+OF_THE_LAGRANGIAN = True
 
 def _equation(model) -> str:
     """What E is, in words."""

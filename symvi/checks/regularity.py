@@ -26,6 +26,8 @@ from .report import CheckResult
 from .._runtime.core.model_info import Kernel as KernelName
 
 NAME = "regularity"
+#: Of the Lagrangian's step map: skipped in pure minimum time (:mod:`.runner`).
+OF_THE_LAGRANGIAN = True
 #: Largest matrix (rows) and total operation count for which the determinant is factored.
 _DETERMINANT_SIZE, _DETERMINANT_OPS = 4, 600
 _STEP = 0.1

@@ -85,6 +85,12 @@ def run_check(name: str, ctx: Context) -> CheckResult:
     if name not in CHECKS:
         raise ValueError(f"no check {name!r}; checks: {', '.join(CHECKS)}")
     module = importlib.import_module(f"{__package__}.{name}")
+    system = ctx.model.control_system
+    if getattr(module, "OF_THE_LAGRANGIAN", False) and system is not None \
+            and system.pure_minimum_time:
+        return CheckResult.skipped(name, (
+            "pure minimum time: the cost is T alone, so the Lagrangian is zero and defines "
+            "no step map; the controls are fixed by their bounds"))
     ctx.budget.begin()
     try:
         result = module.run(ctx)

@@ -69,6 +69,8 @@ __all__ = ["NAME", "TOLERANCE", "HIGH_ORDER_STEPS", "HIGH_ORDER_TOLERANCE", "STE
            "symplectic_defect", "structure_name", "sample_defects", "run"]
 
 NAME = "structure"
+#: Of the Lagrangian's step map: skipped in pure minimum time (:mod:`.runner`).
+OF_THE_LAGRANGIAN = True
 #: Largest relative defect accepted (see the module docstring).
 TOLERANCE = 1e-9
 #: Orders r ≥ 3: the steps tried, and the largest relative defect accepted (docstring).

@@ -77,6 +77,13 @@ class ControlSystem:
                          sp.srepr(self.path_inequalities), sp.srepr(self.time_cost),
                          sp.srepr(self.end)])
 
+    @property
+    def pure_minimum_time(self) -> bool:
+        """The cost is T alone (C independent of the controls, ρ given): the controls are
+        determined only through their bounds, the Lagrangian C∘u is not regular and the
+        barrier of the interior point supplies the curvature (issue 50)."""
+        return self.time_cost is not None and not self.cost.free_symbols & set(self.controls)
+
     def unactuated(self, n: int) -> tuple[int, ...]:
         """The fibre directions no control acts on, in the order of the constraints
         Φ^A = EL(L)_A = 0 they give (paper §3.3.2)."""
@@ -155,6 +162,28 @@ def _time_cost(value, defaults: Mapping[sp.Symbol, float]) -> sp.Expr | None:
     return rho
 
 
+def _pure_minimum_time(name: str, controls: Sequence[sp.Symbol], rho: sp.Expr | None,
+                       bounds: Sequence[tuple[sp.Expr | None, sp.Expr | None]],
+                       path: Sequence[tuple[str, sp.Expr]]) -> None:
+    """Check a cost that does not depend on the controls: only pure minimum time (a free
+    horizon, issue 50) is well posed so, and only with every control bounded — on both
+    sides, or by a path inequality in it (‖τ‖ ≤ τ_max) — since an unbounded control
+    reaches any state in an arbitrarily short time."""
+    if rho is None:
+        raise ModelError(f"the cost of {name!r} does not depend on the controls "
+                         f"{list(map(str, controls))}; with a fixed horizon the controls "
+                         f"are then left undetermined (give a control cost, or time_cost "
+                         f"for pure minimum time)")
+    limited = set().union(*(g.free_symbols for _, g in path))
+    open_ = [str(c) for c, (lower, upper) in zip(controls, bounds)
+             if (lower is None or upper is None) and c not in limited]
+    if open_:
+        raise ModelError(f"pure minimum time (the cost of {name!r} does not depend on the "
+                         f"controls) needs every control bounded on both sides; {open_} "
+                         f"{'is' if len(open_) == 1 else 'are'} not, and an unbounded "
+                         f"control reaches the end in an arbitrarily short time")
+
+
 def end_conditions(end: Any, groupoid: Groupoid, defaults: Mapping[sp.Symbol, float],
                    controls: Sequence[sp.Symbol]) -> tuple[tuple[str, sp.Expr], ...] | None:
     """:attr:`ControlSystem.end` from ``optimal_control(end=...)``: ``"fixed"`` (None),
@@ -206,7 +235,8 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
     lagrangian:
         L(q, y) in the groupoid's first-order symbols (e.g. ``G.q, G.qdot``; ``G.xi``).
     cost:
-        C(q, y, u) in those symbols and the control symbols.
+        C(q, y, u) in those symbols and the control symbols; free of the controls only
+        in pure minimum time (``time_cost``).
     controls:
         One symbol per actuated direction: u_a = EL(L)_a.
     actuated:
@@ -236,9 +266,11 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
     time_cost:
         ρ > 0 (a number or an expression in the parameters) makes the horizon T free:
         the solve minimises J_d + ρ·T over the path and T = N·h, the ``h`` given to
-        ``solve_bvp`` being the first guess (:mod:`symvi._runtime.bvp.horizon`). Keep a
-        control cost in C: with C = 0 (pure minimum time) the optimality system is
-        singular; a small ε|u|² gives nearly bang–bang controls.
+        ``solve_bvp`` being the first guess (:mod:`symvi._runtime.bvp.horizon`). With
+        C = 0 (any C free of the controls) the problem is pure minimum time: every
+        control must then be bounded on both sides or appear in an inequality, else
+        :class:`ModelError` (an unbounded control reaches the end in no time); the
+        interior point's barrier supplies the curvature the Lagrangian lacks.
     end:
         The final end of the path: ``"fixed"`` (both nodes of the last element given to
         ``solve_bvp``), ``"free"`` (the last nodes are unknowns: the natural boundary
@@ -268,10 +300,11 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
     if unknown:
         raise ModelError(f"undeclared symbol(s) {sorted(map(str, unknown))} in the cost of "
                          f"{name!r}; it is C(q, y, u) with controls {list(map(str, u))}")
-    if not C.free_symbols & set(u):
-        raise ModelError(f"the cost of {name!r} does not depend on the controls {list(map(str, u))}")
     defaults = dict(_sympify_parameters(parameters))
     rho = _time_cost(time_cost, defaults)
+    bounds_u, path = declared(bounds, inequalities, u, groupoid.continuous_symbols(1), defaults)
+    if not C.free_symbols & set(u):
+        _pure_minimum_time(name, u, rho, bounds_u, path)
     final = end_conditions(end, groupoid, defaults, u)
     if final is not None and symmetries and equations == "variational":
         raise ModelError("declared symmetries fix the multipliers' freedom of exactly "
@@ -280,8 +313,7 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
                          "leave end='fixed' or the symmetries out")
     EL = euler_lagrange_operator(algebroid, L)
     forces = [EL[a] for a in directions]
-    system = ControlSystem(L, C, u, directions, equations, *declared(
-        bounds, inequalities, u, groupoid.continuous_symbols(1), defaults), rho, final)
+    system = ControlSystem(L, C, u, directions, equations, bounds_u, path, rho, final)
     return Model(
         name=name, groupoid=groupoid, lagrangian=C.xreplace(dict(zip(u, forces))),
         discretisation=discretisation or groupoid.default_discretisation(2),

@@ -287,6 +287,8 @@ class Model:
         With constraints Φ the condition is on the bordered Hessian
         [[∂²L/∂v², (∂Φ/∂v)ᵀ], [∂Φ/∂v, 0]] (v the highest derivatives).
         """
+        if self.control_system is not None and self.control_system.pure_minimum_time:
+            return
         hessian = sp.hessian(L, highest)
         what = f"its Hessian with respect to {[str(s) for s in highest]}"
         if self.constraints:

@@ -94,6 +94,8 @@ class DerivedModel:
     #: :attr:`DiscreteModel.end_free` and :attr:`DiscreteModel.end_names`.
     end_free: bool = False
     end_names: tuple[str, ...] = ()
+    #: :attr:`DiscreteModel.pure_minimum_time`.
+    pure_minimum_time: bool = False
     #: The inequalities c ≤ 0 per window (their count is the ``inequality`` kernel's rows).
     inequality_names: tuple[str, ...] = ()
     #: The control-free inequalities on one element (the ``boundary`` kernel's rows).
@@ -737,7 +739,7 @@ def _step_kernel(dm: DiscreteModel, kernels: Sequence[Kernel]) -> Kernel:
 
 def _derive(dm: DiscreteModel) -> DerivedModel:
     kernels = _kernels(dm)
-    if not dm.constraints:
+    if not dm.constraints and not dm.pure_minimum_time:
         _check_regular(dm, _step_kernel(dm, kernels))
     g = dm.groupoid
     expressions = [e for k in kernels for _, M in k.outputs for e in M] \
@@ -751,6 +753,7 @@ def _derive(dm: DiscreteModel) -> DerivedModel:
                         constraint_count=len(dm.constraints), control_count=len(dm.controls),
                         constraint_names=dm.constraint_names, unactuated=dm.unactuated,
                         end_free=dm.end_free, end_names=dm.end_names,
+                        pure_minimum_time=dm.pure_minimum_time,
                         inequality_names=dm.inequality_names,
                         boundary_names=dm.boundary_names,
                         intervals=interval_pairs(dm.inequalities, dm.parameters),

@@ -62,6 +62,9 @@ class DiscreteModel:
     inequality_multipliers: tuple[sp.Symbol, ...] = ()
     #: ρ of a free horizon (cost + ρ·T), or None (:mod:`symvi.declaration.control`).
     time_cost: sp.Expr | None = None
+    #: Pure minimum time: the cost is T alone, L_d carries no curvature of its own and
+    #: the interior point's barrier supplies it (:attr:`ControlSystem.pure_minimum_time`).
+    pure_minimum_time: bool = False
     #: The inequalities that involve no control, on one element (the first slot's
     #: coordinates) by the groupoid's first first-order rule, and their names: checked
     #: on the fixed elements of the boundary data.
@@ -131,6 +134,7 @@ def discretise(model: "Model") -> DiscreteModel:
                          inequality_multipliers=tuple(sp.Dummy(f"z{a}", real=True)
                                                       for a in range(len(named))),
                          time_cost=None if system is None else system.time_cost,
+                         pure_minimum_time=system is not None and system.pure_minimum_time,
                          boundary_inequalities=tuple(c for _, c in boundary),
                          boundary_names=tuple(n for n, _ in boundary),
                          **_end(model, system, xs[0], fs[0]))

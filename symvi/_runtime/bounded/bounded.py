@@ -89,9 +89,10 @@ def bounded_horizon(problem, path: Path, options: SolveOptions, cold: bool,
             return warm
     ip, end, iterations, status, message = _interior(problem, path, options, near=not cold)
     phase = "interior point from the guess"
-    if status in FAILED and cold:
+    if status in FAILED and cold and not problem.model.info.pure_minimum_time:
         # as bounded()'s: from the optimum without bounds, T free there too (perturbed
-        # starts of the double integrator stalled at μ = 10, primal infeasibility 4–240)
+        # starts of the double integrator stalled at μ = 10, primal infeasibility 4–240;
+        # pure minimum time has none: without bounds its Newton matrix is zero)
         near = options.replace(mu_start=min(options.mu_start, NEAR_MU))
         optimum, first, _ = unbounded(problem, path, near)
         if optimum is not None:

@@ -103,6 +103,7 @@ class InteriorPoint:
         self._unconfirmed = None    # the last path the active-set Newton did not finish
         #: The active sets :meth:`_identified` tried, with the node correction of the try
         self._tried: dict[bytes, float] = {}
+        self._last_key = b""        # the active set at the last iteration's test
         self.node_correction = np.inf       # the last iteration's, for :meth:`_identified`
         #: Newton steps of the active-set Newton (:mod:`.polish`) from this interior point,
         #: failed attempts included: the result counts them among its iterations
@@ -117,15 +118,27 @@ class InteriorPoint:
         self.unit = problem.step(path)
         #: ∂c/∂T at the last system's path where the horizon is an unknown, else None
         self.rates = None
-        self.inequalities.evaluate(path, problem.p, self.unit)
+        self.inequalities.evaluate(path, problem.p, self.unit, with_jacobian=True)
         c = self.inequalities.values
         self.s = np.maximum(-c, 1e-2 * (1.0 + np.abs(c)))
         path.lam[:, self.s_count:] = self.mu * self.unit / self.s
+        #: The curvature scale where W has none (pure minimum time, whose Lagrangian is
+        #: zero): the barrier's GᵀΣG at μ = 1 at the start, fixed for the solve
+        self.curved = True          # whether W has curvature (:meth:`curvature_scale`)
+        self.barrier_scale = float((self.unit * self.squared_gradients() / self.s ** 2).max())
 
     @property
     def history(self) -> dict[str, list]:
         """The iteration log's columns so far (:mod:`.log`)."""
         return self.log.rows
+
+    def curvature_scale(self, ab, bw: int) -> float:
+        """The scale of inertia-correcting shifts and of the penalties on active rows: W's
+        largest diagonal entry on the nodes (not Σ's, 10¹⁰ larger near the end), or
+        :attr:`barrier_scale` where W is zero."""
+        scale = float(np.abs(ab[2 * bw][self.nodes[:ab.shape[1]]]).max(initial=0.0))
+        self.curved = scale > 0.0
+        return scale if self.curved else self.barrier_scale
 
     def z(self, path: Path) -> np.ndarray:
         return path.lam[:, self.s_count:]
@@ -139,8 +152,7 @@ class InteriorPoint:
         dual = float(np.abs(res[self.nodes]).max(initial=0.0))
         eq = float(np.abs(res[self.rows]).max(initial=0.0))
         self.stencil = res.copy()
-        # the scale of inertia-correcting shifts: W's, not Σ's (10¹⁰ larger near the end)
-        self.scale = float(np.abs(ab[2 * bw][self.nodes[:ab.shape[1]]]).max(initial=0.0))
+        self.scale = self.curvature_scale(ab, bw)
         self.hessian = np.array(ab, order="F")      # W, before the barrier adds GᵀΣG
         self.rates = self.problem.inequality_rates(path)
         finite = finite and self.reduce(path, self.s, res, self.rates, ab)
@@ -303,7 +315,7 @@ class InteriorPoint:
             # and every bound holding at path, whatever xtol (barrier.BOUND_TOLERANCE):
             # where one does not, the iteration goes on, its steps cutting c + s
             unconfirmed = False
-            if max(error, correction) <= tolerance and self.bounds_hold():
+            if max(error, correction) <= tolerance and self.bounds_hold(path):
                 floor = self.rounding_floor(path, kkt)
                 if max(error, correction) + floor > tolerance:
                     # small by luck against the noise: judged as that sum, and on (from
@@ -429,6 +441,9 @@ class InteriorPoint:
                 nodes > self.options.identify * (1.0 + float(np.abs(path.x).max(initial=0.0))):
             return None
         key = (self.z(path) > self.s).tobytes()
+        stable, self._last_key = key == self._last_key, key
+        if not stable:
+            return None         # the set changed at the last iteration: not identified
         if nodes > 0.1 * self._tried.get(key, np.inf):
             return None         # tried from no farther: again only from ten times closer
         self._tried[key] = nodes
@@ -437,11 +452,12 @@ class InteriorPoint:
             return None
         return finished[0], f" (its active set identified and finished){finished[1]}"
 
-    def bounds_hold(self, among: np.ndarray | None = None) -> bool:
-        """Whether every inequality (of the rows ``among``, default all) holds at the
-        path last evaluated, to :data:`.barrier.BOUND_TOLERANCE` of its scale: the
-        condition of every SUCCESS."""
-        return self.inequalities.violation(among=among)[0] <= BOUND_TOLERANCE
+    def bounds_hold(self, path: Path, among: np.ndarray | None = None) -> bool:
+        """Whether every inequality (of the rows ``among``, default all) holds at
+        ``path``, last evaluated, to :data:`.barrier.BOUND_TOLERANCE` of its scale beyond
+        its rounding (:meth:`.barrier.Inequalities.holds`): the condition of every
+        SUCCESS."""
+        return self.inequalities.holds(path, among)
 
     def rounding_floor(self, path: Path, kkt: np.ndarray) -> float:
         """The largest ‖·‖∞ of the change in the μ = 0 KKT correction ``kkt``
@@ -522,7 +538,7 @@ class InteriorPoint:
         its Cholesky factorisation is rounding. SUCCESS, or SADDLE."""
         _, ab, bw, finite = self.problem.assemble(path, True)
         active = (self.z(path) > self.s).astype(float)
-        scale = float(np.abs(ab[2 * bw][self.nodes[:ab.shape[1]]]).max(initial=0.0))
+        scale = self.curvature_scale(ab, bw)
         verdict, rates = None, self.problem.inequality_rates(path)
         for rho in PENALTIES if finite else ():
             verdict = self.curvature(path, ab, bw, active * rho * scale / self.squared_gradients(),
@@ -597,14 +613,14 @@ class InteriorPoint:
         ILL_CONDITIONED with the violation (the phases accept no such path; this is the
         last line against a false SUCCESS)."""
         finite = self.inequalities.evaluate(path, self.problem.p, self.problem.step(path))
-        if finite and self.bounds_hold():
+        if finite and self.bounds_hold(path):
             return Status.SUCCESS, message
         where = self.inequalities.describe_violation(self.problem.step(path)) if finite else \
             "an inequality is not finite"
         return Status.ILL_CONDITIONED, (
             f"converged within the tolerance{message}, but at the path returned {where}, "
-            f"more than {BOUND_TOLERANCE:.0e} of its scale: not accepted. Ask a smaller "
-            f"xtol")
+            f"more than {BOUND_TOLERANCE:.0e} of its scale beyond its rounding: not "
+            f"accepted. Ask a smaller xtol")
 
     def result(self, path: Path, iterations: int, status: Status, message: str) -> BVPResult:
         """The :class:`BVPResult` of the solve, with the bound multipliers, the active

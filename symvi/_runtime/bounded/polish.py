@@ -55,6 +55,16 @@ from ..bvp.newton import NOISE
 # dropping two at once diverged; a warm start of the torque-limited slew at τ_max = 11 →
 # 11.2 at N = 1000: a dozen windows leave).
 
+#: The least z/s of the dropped rows added once where Newton on the active set z > s
+#: fails and W is zero: rows the barrier has not decided (degenerate: z/s stays O(1) as
+#: μ → 0, where an inactive row's falls as μ).
+UNDECIDED = 0.1
+
+#: Newton on an active set stops where a correction fails to halve while above this
+#: many tolerances: near the tolerance, rounding makes corrections wander (the slew at
+#: xtol = 1e-12: 1.5e-12, 2.5e-12, 7.4e-13 about a tolerance of 2e-12, then converged).
+WANDERING = 1e3
+
 #: Random directions of the rounding floor (:func:`_floor`).
 SAMPLES = 3
 
@@ -71,20 +81,25 @@ def polish(ip, path: Path, tolerance: float, active: np.ndarray | None = None):
     if ip.problem.gauge is not None:
         return None     # replaced rows of exactly dependent constraints: not this system
     active = (ip.z(path) > ip.s) if active is None else active
-    total, single, weakest = 0, None, True
+    total, single, weakest, undecided = 0, None, True, True
     for _ in range(ip.options.polish_rounds):
         try:
             converged = _newton(ip, path, active, tolerance)
+            dependent = False
         except Dependent:
-            converged = None
-            if single is None and weakest:
-                # a vertex: the double integrator's minimum time at even N, every window
-                # on its bound and one row too many — without the row of least
-                # multiplier, which then holds as an equality anyway
-                single = active.copy()
-                z = np.where(active, ip.z(path), np.inf)
-                single[np.unravel_index(int(np.argmin(z)), active.shape)] = False
-                weakest = False
+            converged, dependent = None, True
+        joined = None if converged is not None or single is not None or not undecided \
+            else _undecided(ip, path, active)
+        if joined is not None:
+            single, undecided = joined, False
+        elif dependent and single is None and weakest:
+            # a vertex: the double integrator's minimum time at even N, every window on
+            # its bound and one row too many — without the row of least multiplier,
+            # which then holds as an equality anyway
+            single = active.copy()
+            z = np.where(active, ip.z(path), np.inf)
+            single[np.unravel_index(int(np.argmin(z)), active.shape)] = False
+            weakest = False
         if converged is None:
             if single is None:
                 return None
@@ -103,7 +118,7 @@ def polish(ip, path: Path, tolerance: float, active: np.ndarray | None = None):
         # tolerances from the optimum, where its multiplier is 4.5e-5)
         norms = np.sqrt(ip.squared_gradients())
         joining = ~active & ((c > tolerance * np.minimum(1.0, norms))
-                             | (ineq.relative() > BOUND_TOLERANCE))
+                             | (ineq.relative() - ineq.rounding(path) > BOUND_TOLERANCE))
         if not (leaving.any() or joining.any()):
             return _accepted(ip, path, active, tolerance, total, correction, floor)
         extreme = np.where(active, z, np.inf) if leaving.any() else np.where(active, -np.inf, -c)
@@ -113,6 +128,18 @@ def polish(ip, path: Path, tolerance: float, active: np.ndarray | None = None):
         if (active == single).all():
             single = None
     return None
+
+
+def _undecided(ip, path: Path, active: np.ndarray) -> np.ndarray | None:
+    """Without curvature of its own (pure minimum time, W = 0) the directions no active
+    row fixes are free, and Newton wanders or the matrix is singular (at N = 10⁴, T 2 →
+    5.4 → 1.3 → 20 with the switching windows' rows dropped): ``active`` with the rows
+    the barrier leaves undecided (z/s ≥ :data:`UNDECIDED`), or None where W has curvature
+    or there are none."""
+    if ip.curved:
+        return None
+    undecided = ~active & (ip.z(path) >= UNDECIDED * ip.s)
+    return active | undecided if undecided.any() else None
 
 
 def _newton(ip, path: Path, active: np.ndarray, tolerance: float):
@@ -137,7 +164,7 @@ def _newton(ip, path: Path, active: np.ndarray, tolerance: float):
         # corrections between 1.4e-7 and 9.3e-7 about a tolerance of 1.6e-7)
         # the active rows hold at path too (barrier.BOUND_TOLERANCE), whatever the
         # tolerance; a dropped one that does not joins in polish()
-        if within and correction <= tolerance and ip.bounds_hold(active):
+        if within and correction <= tolerance and ip.bounds_hold(path, active):
             floor = _floor(ip, path, active, delta, dz, solve)
             # and shrinking, or rounding's noise: a correction that did not shrink
             # estimates no error (a hunt: a free horizon's T = 0.032 for T* = 2.06 at
@@ -145,6 +172,11 @@ def _newton(ip, path: Path, active: np.ndarray, tolerance: float):
             shrinking = correction <= previous / 2 or correction <= NOISE * floor
             if shrinking and correction + floor <= tolerance:
                 return path, step, correction, floor
+        if correction > max(previous / 2, WANDERING * tolerance):
+            # not converging, far above rounding's level: not this active set's
+            # neighbourhood (a wrong set wandered over all its steps, each counted
+            # among the iterations)
+            return None
         within, previous = correction <= tolerance, correction
         moved = problem.moved(path, delta, 1.0)
         if moved is None:

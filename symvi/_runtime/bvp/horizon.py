@@ -54,9 +54,15 @@ def free_horizon(newton, solve, model, p, N: int, h: float,
     None for the solve's own guess), everything else as the solve was asked
     (:func:`.bvp.fixed_horizon`)."""
     if options.horizon_method == "secant":
+        if model.info.pure_minimum_time:
+            raise ValueError("horizon_method='secant' minimises the fixed-horizon optimum "
+                             "J*(T) + ρT over T, and in pure minimum time J* is zero "
+                             "wherever T is feasible: use horizon_method='newton'")
         return outer(solve, model, p, N, h, options)
     first = newton()
-    if first.success or not model.inequalities:
+    if first.success or not model.inequalities or model.info.pure_minimum_time:
+        # pure minimum time has no fixed-horizon optimum for the secant to move: every
+        # feasible path costs nothing at a fixed T
         return first
     result = outer(solve, model, p, N, h, options)
     if result.success:

@@ -21,7 +21,7 @@ from typing import Any, Mapping
 
 #: The schema version of :class:`ModelInfo`: raised whenever a field is added, removed,
 #: renamed or changes meaning, so that a package written with another schema is refused.
-VERSION = 2
+VERSION = 3
 
 
 class ModelInfoError(ValueError):
@@ -163,6 +163,9 @@ class ModelInfo:
     intervals: tuple[tuple[int, int], ...]
     #: Whether the final time is free (the ``horizon`` kernel).
     free_horizon: bool
+    #: Whether the cost is the horizon alone (pure minimum time): no control cost, the
+    #: controls fixed by their bounds only.
+    pure_minimum_time: bool
     #: Per fibre coordinate: whether it is an increment over h (a group factor's ξ).
     step_scaled: tuple[bool, ...]
     #: The names of the declared symmetries (one Noether quantity each).
