@@ -1,6 +1,6 @@
 """Bounded optimal control: symvi's ``solve_bvp`` against CasADi + IPOPT and CasADi + FATROP.
 
-Issue 50's benchmark. Three bundled bounded problems at N = 100, 1000 and 10⁴ steps, in
+Issue 50's benchmark. Four bundled bounded problems at N = 100, 1000 and 10⁴ steps, in
 one run, each solver on the same discrete problem from the same initial path:
 
 * ``spacecraft_slew`` (T = 1): the rigid body on SO(3) rest to rest through a quarter turn,
@@ -15,7 +15,10 @@ one run, each solver on the same discrete problem from the same initial path:
 * ``minimum_time_slew`` (first guess T = 1): the slew's torque limits (no rate bound) with
   a free horizon, min Σ_w L_d + ρT, ρ = 100, over the increments and T (h = T/N), rest to
   rest (``casadi_problems.timed_slew_compact``, ``timed_slew_stagewise``: for FATROP T is
-  a state of every stage, T_{k+1} = T_k); symvi's cost printed is Σ L_d + ρT too.
+  a state of every stage, T_{k+1} = T_k); symvi's cost printed is Σ L_d + ρT too;
+* ``minimum_time_double_integrator`` (first guess T = 1, half T*): pure minimum time, |u|
+  ≤ 1, from nodes at rest (x_0 = x_1 = 0, x_{N−1} = x_N = 1), min T over the nodes and T
+  (``casadi_problems.pure_time_compact``, ``pure_time_stagewise``).
 
 Solvers (CasADi formulations in ``casadi_problems.py``):
 
@@ -95,7 +98,10 @@ except ImportError:
 
 BUILD = Path(__file__).resolve().parent.parent / "generated"
 #: T, or a free horizon's first guess
-HORIZON = {"spacecraft_slew": 1.0, "cart_pole_swing_up": 2.5, "minimum_time_slew": 1.0}
+HORIZON = {"spacecraft_slew": 1.0, "cart_pole_swing_up": 2.5, "minimum_time_slew": 1.0,
+           "minimum_time_double_integrator": 1.0}
+#: Boundary nodes where the example's are States (the CasADi forms take nodes)
+NODES = {"minimum_time_double_integrator": (np.zeros((2, 1)), np.ones((2, 1)))}
 SIZES = (100, 1000, 10_000)
 ROUNDS = {100: 5, 1000: 3}          # 2 beyond
 SOLVE_LIMIT = 120.0                 # s: a single solve beyond is killed
@@ -185,9 +191,12 @@ def isolated(call: Callable, limit: float):
 # Solvers
 # ---------------------------------------------------------------------------------------
 def objective(module, result) -> float:
-    """The cost minimised: Σ L_d, and ρT with a free horizon."""
+    """The cost minimised: Σ L_d, and ρT with a free horizon (T alone in pure minimum
+    time, whose bundled problem has ρ = 1)."""
     if not module.INFO.free_horizon:
         return float(result.cost)
+    if module.INFO.pure_minimum_time:
+        return float(result.T)
     return float(result.cost) + module.model.params()[module.INFO.parameters.index("rho")] \
         * result.T
 
@@ -291,6 +300,9 @@ def formulations(name, module, model, start, end, N, h):
         args = (path, start, end, N, h, np.array([p["I1"], p["I2"], p["I3"]]),
                 p["tau_max"], p["rho"])
         return cp.timed_slew_compact(*args), cp.timed_slew_stagewise(*args)
+    if name == "minimum_time_double_integrator":
+        args = (path, start, end, N, h, p["u_max"])
+        return cp.pure_time_compact(*args), cp.pure_time_stagewise(*args)
     args = (path, start, end, N, h, p, p["u_max"], p["d"])
     return cp.cart_pole_compact(*args), cp.cart_pole_stagewise(*args)
 
@@ -321,7 +333,8 @@ def bench(name: str, module, model, N: int, setups: dict) -> tuple[float, list[R
     """Print one (problem, N) block; return (ratio, rows)."""
     T = HORIZON[name]
     h = T / N
-    start, end = (np.asarray(a, float) for a in (model.example.start, model.example.end))
+    start, end = NODES.get(name) or (np.asarray(a, float)
+                                     for a in (model.example.start, model.example.end))
     print(f"\n{name}, N = {N}, T = {T}, h = {h:g}")
     result = module.solve_bvp(start, end, N, h)            # untimed: the cost check
     rows = [symvi_row(module, start, end, N, h)]

@@ -302,3 +302,56 @@ def cart_pole_stagewise(path, start, end, N, h, p, u_max, d) -> Nlp:
 
     return Nlp("stage-wise", x, cost, ca.vertcat(*rows), lbg, ubg, lbx, ubx, layout(path.x),
                ([True] * 5 + [False] * 2) * K, lambda r: layout(np.asarray(r.x)))
+
+
+def pure_time_compact(path, start, end, N, h, u_max) -> Nlp:
+    """Pure minimum time of the double integrator ẍ = u from nodes: unknowns q_2 … q_{N−2}
+    and T (h = T/N); per window w = 0 … N−2, u_w = (q_w − 2q_{w+1} + q_{w+2})/h² (the
+    three-point rule's EL of ½ẋ²) with |u_w| ≤ u_max; cost T."""
+    Q, T = ca.SX.sym("q", N - 3), ca.SX.sym("T")
+    nodes = ca.vertcat(start[0, 0], start[1, 0], Q, end[0, 0], end[1, 0])
+    u = (nodes[:-2] - 2 * nodes[1:-1] + nodes[2:]) / (T / N) ** 2
+    x = ca.vertcat(Q, T)
+    lbx, ubx = np.full(N - 2, -np.inf), np.full(N - 2, np.inf)
+    lbx[-1] = 1e-3
+    limits = u_max * np.ones(N - 1)
+    return Nlp("compact", x, T, u, -limits, limits, lbx, ubx,
+               np.r_[path.x[2:-2, 0], N * h], [False] * (N - 1),
+               lambda r: np.r_[np.asarray(r.x)[2:-2, 0], r.T])
+
+
+def pure_time_stagewise(path, start, end, N, h, u_max) -> Nlp:
+    """:func:`pure_time_compact` stage-wise for FATROP: stage k = 0 … N−2 (window k): state
+    (q_k, q_{k+1}, T) (3), control q_{k+2}, dynamics (q_{k+1}, q_{k+2}, T), and |u_k| ≤
+    u_max as the rows N²(q_k − 2q_{k+1} + q_{k+2}) ∓ u_max T² of one sign each (T²u: rows
+    of u's scale, not h²u's, since FATROP does no scaling: at h²'s, its tolerance 1e-8
+    let u exceed its bound by 1e-4 at N = 100); cost T on the last stage; the first
+    state's nodes and the last's fixed, T free."""
+    K = N - 1
+    S = [ca.SX.sym(f"s{k}", 3) for k in range(K + 1)]
+    U = [ca.SX.sym(f"u{k}", 1) for k in range(K)]
+    variables, rows, lbg, ubg = [], [], [], []
+    for k in range(K):
+        variables.extend([S[k], U[k]])
+        second = N**2 * (S[k][0] - 2 * S[k][1] + U[k])     # T²u: FATROP does not scale
+        step2 = u_max * S[k][2] ** 2
+        rows.extend([S[k + 1] - ca.vertcat(S[k][1], U[k], S[k][2]),
+                     second - step2, second + step2])
+        lbg.extend([0.0, 0.0, 0.0, -np.inf, 0.0]), ubg.extend([0.0, 0.0, 0.0, 0.0, np.inf])
+    variables.append(S[K])
+    x = ca.vertcat(*variables)
+    lbx, ubx = np.full(x.shape[0], -np.inf), np.full(x.shape[0], np.inf)
+    lbx[:2], ubx[:2] = (start[0, 0], start[1, 0]), (start[0, 0], start[1, 0])
+    lbx[-3:-1], ubx[-3:-1] = (end[0, 0], end[1, 0]), (end[0, 0], end[1, 0])
+    lbx[2::4] = 1e-3
+
+    def layout(q, T):
+        parts = []
+        for k in range(K):
+            parts.append([q[k], q[k + 1], T, q[k + 2]])
+        parts.append([q[K], q[K + 1], T])
+        return np.concatenate(parts)
+
+    return Nlp("stage-wise", x, S[K][2], ca.vertcat(*rows), np.array(lbg), np.array(ubg),
+               lbx, ubx, layout(path.x[:, 0], N * h), ([True] * 3 + [False] * 2) * K,
+               lambda r: layout(np.asarray(r.x)[:, 0], r.T))

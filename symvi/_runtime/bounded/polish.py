@@ -200,7 +200,7 @@ def _correction(ip, path: Path, active: np.ndarray):
         return None
     size = ab.shape[1]
     J = dia_matrix((ab[bw:], bw - np.arange(2 * bw + 1)), shape=(size, size))
-    G = _block_jacobian(ip, active)
+    G = block_jacobian(ip, active)
     rates = problem.inequality_rates(path)
     if rates is not None:       # a free horizon: W's border, and ∂c/∂T of the active rows
         b, d = problem.raw
@@ -224,7 +224,7 @@ def _correction(ip, path: Path, active: np.ndarray):
     return x[:size], x[size:], solve
 
 
-def _block_jacobian(ip, active: np.ndarray):
+def block_jacobian(ip, active: np.ndarray):
     """G_𝒜 in the block layout of the reduced system: the active rows' gradients with
     respect to the free nodes' corrections (:attr:`.barrier.Inequalities.jacobian`)."""
     from scipy.sparse import csr_matrix

@@ -76,6 +76,9 @@ class HorizonProblem(Problem):
         #: barrier's (:meth:`add_to_border`)
         self.raw = None
         self._column = None     # (shift, J⁻¹b) of the last factorisation
+        #: The inertia correction's shift on σ relative to the band's: σ's curvature is
+        #: in its own units (the interior point sets it to the corner's size over W's)
+        self.corner_weight = 1.0
 
     def _at(self, path: Path) -> None:
         self.h = path.T / self.N
@@ -257,7 +260,7 @@ class HorizonProblem(Problem):
         from scipy.linalg import LinAlgError
 
         band = None if shifted is None else shifted[:-1]
-        corner = shift if shifted is None or shifted[-1] else 0.0
+        corner = shift * self.corner_weight if shifted is None or shifted[-1] else 0.0
         y = super().solve(ab, bw, rhs[:-1], shift, band, at)
         b, d = self.border
         w = self._solved_column(ab, bw, shift, band, at)
@@ -279,10 +282,11 @@ class HorizonProblem(Problem):
         return self._column[1]
 
     def curvature_beyond_band(self, ab, bw: int, shift: float = 0.0) -> float:
-        """The Schur complement d + shift − bᵀ(J + shift)⁻¹b: with the band's inertia
-        right, the bordered matrix's is right iff it is positive (Haynsworth)."""
+        """The Schur complement d + w·shift − bᵀ(J + shift)⁻¹b (w the
+        :attr:`corner_weight`): with the band's inertia right, the bordered matrix's is
+        right iff it is positive (Haynsworth)."""
         b, d = self.border
-        return d + shift - float(b @ self._solved_column(ab, bw, shift, None, None))
+        return d + shift * self.corner_weight - float(b @ self._solved_column(ab, bw, shift, None, None))
 
     def schur_with(self, work: np.ndarray, bw: int, column: np.ndarray, corner: float) -> float:
         """corner − columnᵀ M⁻¹ column, M the band matrix in ``work`` (left intact): the
@@ -306,7 +310,8 @@ class HorizonProblem(Problem):
         b, d = self.border
         dT, band = float(delta[-1]), nodes[:-1]
         inner = super().curvature(ab, bw, delta[:-1], band, shift)
-        return inner + 2 * dT * float(b[band] @ delta[:-1][band]) + (d + shift) * dT * dT
+        return inner + 2 * dT * float(b[band] @ delta[:-1][band]) + \
+            (d + shift * self.corner_weight) * dT * dT
 
     def moved(self, path: Path, delta, alpha):
         self._at(path)
