@@ -84,9 +84,13 @@ def _declare(**overrides):
 @pytest.mark.parametrize("overrides, message", [
     (dict(time_cost=None), r"does not depend on the controls \['u'\]; with a fixed "
                            r"horizon the controls are then left undetermined"),
-    (dict(bounds=None), r"needs every control bounded on both sides; \['u'\] is not"),
+    (dict(bounds=None), r"needs every control bounded on both sides, by its bounds or an "
+                        r"inequality growing with it; \['u'\] is not"),
     (dict(bounds={"u": (0, None)}), r"needs every control bounded on both sides"),
     (dict(bounds={"u": (None, 1)}, inequalities=[X - 2]), r"\['u'\] is not"),
+    # a hunt: x·u ≤ 1 was taken for a bound, and u reached 5e3 where x is small
+    (dict(bounds=None, inequalities=[X * U - 1]), r"\['u'\] is not"),
+    (dict(bounds=None, inequalities=[U**3 - 1]), r"\['u'\] is not"),
 ])
 def test_pure_minimum_time_with_nothing_bounding_the_controls_is_refused(overrides, message):
     """Issue 50, item 6: at declaration, before any derivation."""
@@ -94,9 +98,12 @@ def test_pure_minimum_time_with_nothing_bounding_the_controls_is_refused(overrid
         _declare(**overrides)
 
 
-def test_an_inequality_on_the_control_bounds_it():
-    """u² ≤ 1 as a path inequality bounds u as well as the pair of bounds does."""
-    model = _declare(bounds=None, inequalities=[U**2 - 1])
+@pytest.mark.parametrize("bounds, inequality", [
+    (None, U**2 - 1), (None, (U - X)**2 - 1), ({U: (-1, None)}, sp.exp(U) - 3)])
+def test_an_inequality_growing_with_the_control_bounds_it(bounds, inequality):
+    """u² ≤ 1 (or (u − x)² ≤ 1, or a lower bound and eᵘ ≤ 3) bounds u as well as the pair
+    of bounds does."""
+    model = _declare(bounds=bounds, inequalities=[inequality])
     assert model.control_system.pure_minimum_time
 
 

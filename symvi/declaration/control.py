@@ -164,24 +164,53 @@ def _time_cost(value, defaults: Mapping[sp.Symbol, float]) -> sp.Expr | None:
 
 def _pure_minimum_time(name: str, controls: Sequence[sp.Symbol], rho: sp.Expr | None,
                        bounds: Sequence[tuple[sp.Expr | None, sp.Expr | None]],
-                       path: Sequence[tuple[str, sp.Expr]]) -> None:
+                       path: Sequence[tuple[str, sp.Expr]],
+                       defaults: Mapping[sp.Symbol, float]) -> None:
     """Check a cost that does not depend on the controls: only pure minimum time (a free
-    horizon, issue 50) is well posed so, and only with every control bounded — on both
-    sides, or by a path inequality in it (‖τ‖ ≤ τ_max) — since an unbounded control
-    reaches any state in an arbitrarily short time."""
+    horizon, issue 50) is well posed so, and only with every control bounded on both
+    sides — by its bounds, or by a path inequality g ≤ 0 that grows without bound as the
+    control does (u² ≤ 1, ‖τ‖ ≤ τ_max; not x·u ≤ 1, open where x = 0) — since an
+    unbounded control reaches any state in an arbitrarily short time."""
     if rho is None:
         raise ModelError(f"the cost of {name!r} does not depend on the controls "
                          f"{list(map(str, controls))}; with a fixed horizon the controls "
                          f"are then left undetermined (give a control cost, or time_cost "
                          f"for pure minimum time)")
-    limited = set().union(*(g.free_symbols for _, g in path))
-    open_ = [str(c) for c, (lower, upper) in zip(controls, bounds)
-             if (lower is None or upper is None) and c not in limited]
+    open_ = [str(u) for u, (lower, upper) in zip(controls, bounds)
+             if not ((upper is not None or _limits(u, +1, path, defaults))
+                     and (lower is not None or _limits(u, -1, path, defaults)))]
     if open_:
         raise ModelError(f"pure minimum time (the cost of {name!r} does not depend on the "
-                         f"controls) needs every control bounded on both sides; {open_} "
+                         f"controls) needs every control bounded on both sides, by its "
+                         f"bounds or an inequality growing with it; {open_} "
                          f"{'is' if len(open_) == 1 else 'are'} not, and an unbounded "
                          f"control reaches the end in an arbitrarily short time")
+
+
+#: Values of the other symbols at which an inequality must grow with a control
+#: (:func:`_limits`): generic, of both signs.
+_SAMPLES = ((0.7318, -1.2391, 0.4127, -0.8853), (-0.5531, 0.9174, -1.4462, 0.2659))
+
+
+def _limits(u: sp.Symbol, direction: int, path: Sequence[tuple[str, sp.Expr]],
+            defaults: Mapping[sp.Symbol, float]) -> bool:
+    """Whether some path inequality g ≤ 0 has g → +∞ as u → direction·∞ at generic
+    values of every other symbol (the parameters at their defaults): it bounds u there."""
+    for _, g in path:
+        if u not in g.free_symbols:
+            continue
+        others = sorted(g.free_symbols - {u} - set(defaults), key=str)
+        grows = True
+        for sample in _SAMPLES:
+            values = dict(defaults) | {v: sample[i % len(sample)] for i, v in enumerate(others)}
+            try:
+                limit = sp.limit(g.xreplace(values), u, direction * sp.oo)
+            except (NotImplementedError, ValueError, TypeError):
+                limit = None
+            grows = grows and limit == sp.oo
+        if grows:
+            return True
+    return False
 
 
 def end_conditions(end: Any, groupoid: Groupoid, defaults: Mapping[sp.Symbol, float],
@@ -304,7 +333,7 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
     rho = _time_cost(time_cost, defaults)
     bounds_u, path = declared(bounds, inequalities, u, groupoid.continuous_symbols(1), defaults)
     if not C.free_symbols & set(u):
-        _pure_minimum_time(name, u, rho, bounds_u, path)
+        _pure_minimum_time(name, u, rho, bounds_u, path, defaults)
     final = end_conditions(end, groupoid, defaults, u)
     if final is not None and symmetries and equations == "variational":
         raise ModelError("declared symmetries fix the multipliers' freedom of exactly "

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .polish import block_jacobian
+from .polish import block_jacobian, both_sides
 
 #: The largest 1-norm condition number of the rows fixing the unknowns at a vertex
 #: (estimated: Hager–Higham) beyond which they count as dependent: 10⁻³/ε. The pendulum's
@@ -31,6 +31,8 @@ def fixes_every_unknown(ip, ab, bw: int, active: np.ndarray,
     from scipy.sparse import csc_matrix, dia_matrix, hstack, vstack
     from scipy.sparse.linalg import LinearOperator, onenormest, splu
 
+    if both_sides(ip.model, active):
+        return False
     size = ab.shape[1]
     J = csc_matrix(dia_matrix((ab[bw:], bw - np.arange(2 * bw + 1)), shape=(size, size)))
     equality = ip.rows[:size]

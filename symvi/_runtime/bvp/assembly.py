@@ -226,8 +226,13 @@ class Problem:
             else:   # the gauge rows' right-hand sides carry each path's own multipliers
                 delta = self.solve(ab, bw, -other, at=rounded) \
                     - self.solve(ab, bw, -base, at=path)
-            floor = max(floor, float(np.abs(delta).max(initial=0.0)))
+            floor = max(floor, self.correction_norm(delta, path))
         return floor
+
+    def correction_norm(self, delta: np.ndarray, path: Path) -> float:
+        """‖Δ‖∞ of a correction in the block layout, the measure compared with the
+        tolerance xtol·(1 + size)."""
+        return float(np.abs(delta).max(initial=0.0))
 
     def rounded(self, path: Path, seed: int):
         """(``path`` with every unknown — node, multiplier — moved by one unit in the last

@@ -93,7 +93,7 @@ def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list,
         return state, None, Status.SUCCESS, ""
     # SUCCESS only on full Newton corrections, the estimate of the error left (a damped
     # step may be short far from the solution), with the rounding floor beside them
-    size = float(np.abs(delta).max(initial=0.0))
+    size = problem.correction_norm(delta, state)
     tolerance = xtol * (1.0 + problem.size(state))
     corrections.append(size)
     level = problem.rounding_level(ab, bw, state)

@@ -223,6 +223,11 @@ class SolveOptions(Options):
         "the interior point's line search: 'filter' (Wächter & Biegler's filter, the "
         "merit's step where it finds none) or 'merit' (Armijo on the barrier problem's "
         "ℓ1 penalty)"), lambda value, what: one_of(value, what, ("filter", "merit")))
+    mu_strategy: str = option("probing", (
+        "how μ falls once its barrier problem is solved: 'probing' (Mehrotra's: the "
+        "affine-scaling step's complementarity decides, μ ← σ·sᵀz/m with σ = "
+        "(μ_aff/μ)³, at most 0.2μ) or 'monotone' (μ ← 0.2μ)"),
+        lambda value, what: one_of(value, what, ("monotone", "probing")))
     mu_floor: float = option(1e-3, (
         "the barrier parameter's floor, as a factor on xtol: μ falls no lower than "
         "mu_floor·xtol"), positive)
