@@ -464,7 +464,10 @@ class InteriorPoint:
         if self.near or \
                 nodes > self.options.identify * (1.0 + float(np.abs(path.x).max(initial=0.0))):
             return None
-        key = (self.z(path) > self.s).tobytes()
+        identified = self.z(path) > self.s
+        if not (self.curved or identified.any()):
+            return None     # no curvature and nothing active: no vertex identified yet
+        key = identified.tobytes()
         stable, self._last_key = key == self._last_key, key
         if not stable:
             return None         # the set changed at the last iteration: not identified
