@@ -354,8 +354,8 @@ def test_every_start_and_line_search_ends_at_the_same_minimum(slew, capsys):
     ends at the same minimum (cost to 1e-9). With ``verbose`` each interior-point
     iteration prints one line under an IPOPT-like header, and ``history`` keeps the same
     columns, one entry per iteration: μ, the cost, the infeasibilities, complementarity,
-    the KKT correction, the step, the inertia correction's shift and the line search's
-    trials."""
+    the KKT correction, the step, the inertia correction's shift, the line search's
+    trials and the horizon (NaN where fixed)."""
     prob = BoundedSlew(100, 11.0)
     costs = {}
     for start in ("guess", "unbounded"):
@@ -370,7 +370,8 @@ def test_every_start_and_line_search_ends_at_the_same_minimum(slew, capsys):
             rows = [line for line in printed if line[:5].strip().isdigit()]
             h = r.history
             assert sorted(h) == sorted(("mu", "objective", "primal", "dual", "complementarity",
-                                        "correction", "alpha", "shift", "trials"))
+                                        "correction", "alpha", "shift", "trials", "T"))
+            assert np.isnan(h["T"]).all()       # a fixed horizon
             count = len(h["mu"])
             assert count and all(len(v) == count for v in h.values())
             assert len(rows) >= count and any(" iter   objective" in line for line in printed)

@@ -151,17 +151,27 @@ def test_the_penalty_stages_reach_the_certificate(slew):
 
 
 def test_verbose_prints_each_newton_iteration(oc, capsys):
-    """``verbose=True``: one line per Newton iteration on stderr with its residual norm,
-    the same as the result's; nothing without it."""
+    """``verbose=True`` (issue 50, item 7): under an IPOPT-like header, one line per Newton
+    iteration on stderr — cost, infeasibilities, correction, step, shift, trials — the
+    same as the result's ``history``, whose infeasibilities are the residual norms;
+    nothing without it, and the same solve."""
     quiet = _solve(oc)
     assert capsys.readouterr().err == ""
     loud = _solve(oc, verbose=True)
-    lines = [line for line in capsys.readouterr().err.splitlines() if "Newton iteration" in line]
-    assert len(lines) >= loud.iterations >= 1
-    for k, line in enumerate(lines):
-        assert line.startswith(f"symvi: whole trajectory: Newton iteration {k}: residual "
-                               f"{loud.residual_norms[k]:.3e}")
-    assert lines[-1].endswith(": SUCCESS")
+    err = capsys.readouterr().err.splitlines()
+    assert err[0] == "symvi: whole trajectory: Newton" and err[1].startswith(" iter   objective")
+    rows, h = err[2:], loud.history
+    # a row per iteration, the last one's update (if any) counted among the iterations
+    assert len(rows) == len(h["dual"]) and loud.iterations <= len(rows) <= loud.iterations + 1
+    assert rows[-1].endswith(": SUCCESS")
+    # residual_norms also holds the norm after the last update
+    np.testing.assert_array_equal(np.maximum(h["primal"], h["dual"]),
+                                  loud.residual_norms[:len(rows)])
+    for k, row in enumerate(rows):
+        fields = row.split()
+        assert int(fields[0]) == k and float(fields[1]) == float(f"{h['objective'][k]:.7e}")
+        assert float(fields[2]) == float(f"{h['primal'][k]:.2e}")
+    assert np.isnan(h["mu"]).all() and (h["alpha"][:-1] > 0).all() and h["trials"][0] >= 1
     _same(quiet, loud)
 
 
@@ -300,7 +310,7 @@ def test_symvi_run_takes_the_options(build_dir, capsys):
                  "--xtol", "1e-8"])
     captured = capsys.readouterr()
     assert code == 0 and "options    xtol = 1e-08, verbose" in captured.out
-    assert "symvi: whole trajectory: Newton iteration 0: residual" in captured.err
+    assert "symvi: whole trajectory: Newton\n iter   objective" in captured.err
 
 
 @pytest.mark.parametrize("argv, message", [

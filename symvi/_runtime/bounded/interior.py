@@ -35,13 +35,14 @@ MAX_ITERATIONS.
 """
 from __future__ import annotations
 
+import math
 import numpy as np
 
 from ..bvp.band import cholesky_pivot
 from .barrier import BOUND_TOLERANCE, Inequalities, boundary_step, next_barrier
 from .vertex import fixes_every_unknown
 from .filter_steps import filter_step
-from .log import IterationLog
+from ..core.log import IterationLog
 from .interior_steps import step
 from ..core.model_info import Kernel
 from ..bvp.optimality import (FIRST_SHIFT, MAX_SHIFT, NEAR_FIRST_SHIFT, Curvature,
@@ -115,7 +116,8 @@ class InteriorPoint:
         self.active_set_steps = 0
         self.filter, self.filter_mu = None, None     # the filter line search's (filter_steps)
         self.failure = ""           # why a failed iteration stopped, without the diagnosis
-        self.log = IterationLog("near a solution" if near else "from the guess",
+        self.log = IterationLog("interior point " + ("near a solution" if near else
+                                                     "from the guess"),
                                 options.verbose)
         #: The barrier's unit of time: the barrier term of a window is μ·unit·log s (the
         #: step h; with a free horizon, the first one, so that the barrier problem does
@@ -555,7 +557,8 @@ class InteriorPoint:
         c, z = self.inequalities.values, self.z(path)
         self.log.measured(mu=self.mu, objective=self.problem.merit(path)[0],
                           primal=max(eq, float(np.abs(c + self.s).max(initial=0.0))),
-                          dual=dual, complementarity=float((self.s * z).max(initial=0.0)))
+                          dual=dual, complementarity=float((self.s * z).max(initial=0.0)),
+                          T=math.nan if path.T is None else path.T)
 
     def _last_errors(self) -> str:
         hist = self.history

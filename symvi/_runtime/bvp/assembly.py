@@ -42,6 +42,9 @@ class Problem:
         #: :func:`.globalisation.descent_step`).
         self.minimise = bool(model.info.controls)
         self.shift, self.penalty = 0.0, 0.0
+        #: The shift and the trial points of the last step taken, and the log of the
+        #: last Newton solve (:mod:`.newton`, :mod:`..core.log`)
+        self.last_shift, self.last_trials, self.log = 0.0, 0, None
         #: The inertia correction's first shift (:func:`.optimality.next_shift`)
         self.first_shift = FIRST_SHIFT
         #: Whether the last step was a full, unshifted Newton step from an iterate whose

@@ -210,7 +210,8 @@ def fixed_horizon(model, start, end, N: int, h: float, p, guess,
         message += f"; residual norm {norms[-1]:.3e}" + _why(problem, path, status)
     result = _result(model, path, p, h, dict(
         t=h * np.arange(N + 1), iterations=len(steps), residual_norms=np.array(norms),
-        step_norms=np.array(steps), status=status, message=message))
+        step_norms=np.array(steps), status=status, message=message,
+        history=problem.log.history()))
     return _finite(result)
 
 

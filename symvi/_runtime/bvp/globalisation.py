@@ -90,12 +90,14 @@ def descent_step(problem, state, res, ab, bw, delta, contracting: bool = False,
         if rows.any() and problem.curvature(ab, bw, delta, nodes, shift * scale) <= 0.0:
             descent = 0.0       # into W's negative curvature: shift instead
         while descent < 0.0 and alpha >= min_alpha:
+            problem.last_trials += 1
             trial = problem.moved(state, delta, alpha)
             if trial is not None and penalty(problem, trial, rows, nu) \
                     <= cost + nu * infeasibility + 1e-4 * alpha * descent:
                 problem.shift = shift / 10 if alpha == 1.0 and shift > problem.first_shift else \
                     (0.0 if alpha == 1.0 else shift)
                 problem.convex = not rows.any() and alpha == 1.0 and shift == 0.0
+                problem.last_shift = shift      # the iteration log's (relative to W's)
                 return trial, alpha * float(np.abs(delta).max(initial=0.0))
             alpha /= 2
         shift = next_shift(shift, problem.first_shift)
@@ -118,6 +120,7 @@ def natural_step(problem, state, delta, ab, bw: int, size: float):
     smaller), else (state, None)."""
     from scipy.linalg import LinAlgError
 
+    problem.last_trials += 1
     trial = problem.moved(state, delta, 1.0)
     if trial is None:
         return state, None
@@ -140,6 +143,7 @@ def line_search(problem, state, delta, res, min_alpha: float = 2.0**-12):
     base = float(dnrm2(res))
     alpha = 1.0
     while alpha >= min_alpha:
+        problem.last_trials += 1
         trial = problem.moved(state, delta, alpha)
         if trial is not None:
             trial_res, _, _, finite = problem.assemble(trial, False)

@@ -9,11 +9,12 @@ the penalty stages (:mod:`.penalty`). Its globalisation is :mod:`.globalisation`
 """
 from __future__ import annotations
 
-import sys
+import math
 
 import numpy as np
 
 from .globalisation import descent_step, line_search, natural_step
+from ..core.log import IterationLog
 from ..core.options import SolveOptions
 from ..core.results import Status
 
@@ -33,6 +34,7 @@ def newton(problem, state, options: SolveOptions, phase: str = "whole trajectory
 
     maxiter, xtol, ftol = options.maxiter, options.xtol, options.ftol
     norms, steps, corrections = [], [], [np.inf]
+    problem.log = log = IterationLog(f"{phase}: Newton", options.verbose)
     for it in range(maxiter):
         try:
             state, taken, status, message = _iteration(problem, state, it, xtol, ftol, norms,
@@ -41,8 +43,7 @@ def newton(problem, state, options: SolveOptions, phase: str = "whole trajectory
             # a shifted or gauged Newton matrix with a zero pivot in its band LU
             return state, norms, steps, Status.SINGULAR_JACOBIAN, (
                 f"singular Newton matrix at iteration {it} ({exc})")
-        if options.verbose:
-            _report(phase, it, norms, corrections, taken, status, state.T)
+        log.report(it, f": {status.name}" if status is not None else "")
         if taken is not None:
             steps.append(taken)
         if status is not None:
@@ -56,17 +57,15 @@ def newton(problem, state, options: SolveOptions, phase: str = "whole trajectory
             f"Newton's method did not converge in {maxiter} iterations")
 
 
-def _report(phase: str, it: int, norms: list, corrections: list, taken, status,
-            horizon: float | None) -> None:
-    """One line of ``verbose``: the iteration's residual norm, its full Newton
-    correction, the step taken, the horizon where it is an unknown, and the verdict, if
-    any."""
-    correction = f", correction {corrections[-1]:.3e}" if len(corrections) == it + 2 else ""
-    step = f", step {taken:.3g}" if taken is not None else ", no step"
-    T = f", T {horizon:.10g}" if horizon is not None else ""
-    verdict = f": {status.name}" if status is not None else ""
-    print(f"symvi: {phase}: Newton iteration {it}: residual {norms[-1]:.3e}{correction}{step}"
-          f"{T}{verdict}", file=sys.stderr, flush=True)
+def _measure(problem, state, res: np.ndarray) -> None:
+    """The iteration's row of the log (:mod:`..core.log`) at ``state``, its residual
+    ``res``: the cost, the constraint rows' and the node rows' residuals, the horizon."""
+    rows = problem.constraint_rows(state)
+    problem.log.measured(mu=math.nan, objective=problem.merit(state)[0],
+                         primal=float(np.abs(res[:rows.size][rows]).max(initial=0.0)),
+                         dual=float(np.abs(res[:rows.size][~rows]).max(initial=0.0)),
+                         complementarity=math.nan,
+                         T=math.nan if state.T is None else state.T)
 
 
 def _residual_norm(problem, state, with_jacobian: bool = False) -> float:
@@ -82,6 +81,7 @@ def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list,
 
     res, ab, bw, finite = problem.assemble(state, True)
     norms.append(float(np.abs(res).max(initial=0.0)))
+    _measure(problem, state, res)
     if not finite:
         return state, None, Status.NON_FINITE, f"non-finite residual or Jacobian at iteration {it}"
     try:
@@ -96,12 +96,13 @@ def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list,
     size = problem.correction_norm(delta, state)
     tolerance = xtol * (1.0 + problem.size(state))
     corrections.append(size)
+    problem.log.correction(size)
     level = problem.rounding_level(ab, bw, state)
     problem.level = level
     if size <= tolerance and not problem.held:
         return _within_tolerance(problem, state, ab, bw, res, delta, size, tolerance,
                                  corrections[-2], it)
-    taken = None
+    taken, problem.last_shift, problem.last_trials = None, 0.0, 0
     if norms[-1] <= level:
         # the floor costs an update, a residual and a solve: only once Newton stops
         # contracting
@@ -128,6 +129,9 @@ def _iteration(problem, state, it: int, xtol: float, ftol: float, norms: list,
                 f"where the Newton correction, the estimated error of the path, is "
                 f"{size:.1e}", size, tolerance)
         return state, None, Status.STALLED, f"line search stalled at iteration {it}"
+    full = float(np.abs(delta).max(initial=0.0))
+    problem.log.step(alpha=taken / full if full > 0 else 1.0, shift=problem.last_shift,
+                     trials=problem.last_trials)
     return state, taken, None, ""
 
 

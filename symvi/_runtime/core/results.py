@@ -323,9 +323,14 @@ class BVPResult(_Result):
         with a free final time.
     end_multipliers : (P,) multipliers ν of the end conditions ψ = 0 (``end=`` of
         :func:`symvi.optimal_control`), else None.
-    history : per interior-point iteration, arrays ``mu`` (barrier parameter per unit
-        time), ``primal`` and ``dual`` infeasibility, ``complementarity`` (max s·z) and
-        ``alpha`` (step length; 0 where μ fell), like IPOPT's log; else None.
+    history : per Newton (or interior-point) iteration, arrays ``objective``,
+        ``primal`` and ``dual`` infeasibility, ``correction`` (the full Newton
+        correction), ``alpha`` (the step taken relative to it; 0 where none or where μ
+        fell), ``shift`` (the inertia correction's, relative to W's scale), ``trials``
+        and ``T`` (the horizon, where it is an unknown; else NaN), and for the interior
+        point ``mu`` (barrier parameter per unit time) and ``complementarity`` (max s·z),
+        NaN for the equality Newton — the columns of the ``verbose`` log, like IPOPT's
+        (:mod:`._runtime.core.log`).
     cost : Σ_k L_d over the windows — the discrete cost J_d of an optimal-control problem,
         the action sum otherwise. A window of a second-order problem spans nodes k … k+2
         and weighs its integrand by h at node k+1. From States (``solve_bvp(model,

@@ -1,11 +1,13 @@
-"""The interior point's iteration log (issue 50, item 7): one row per iteration, printed
-like IPOPT's with ``verbose`` and kept as the result's ``history``.
+"""The iteration log of the whole-trajectory solvers (issue 50, item 7): one row per
+iteration, printed like IPOPT's with ``verbose`` and kept as the result's ``history``.
 
-Columns: the barrier parameter μ (per unit time), the cost S, the primal infeasibility
-(max of |Φ_d| and |c + s|), the dual infeasibility (max node residual), the
-complementarity max s·z, the KKT correction (the μ = 0 Newton correction the SUCCESS
-rule reads), the step α taken (0 where none), the inertia correction's shift (relative
-to W's largest diagonal entry) and the line search's trial points.
+Columns: the barrier parameter μ (per unit time; the interior point's, "-" for the
+equality Newton), the cost S (+ ρT with a free horizon), the primal infeasibility (max
+of |Φ_d|, and |c + s| with inequalities), the dual infeasibility (max node residual),
+the complementarity max s·z ("-" without inequalities), the Newton correction (for the
+interior point the μ = 0 one the SUCCESS rule reads), the step α taken (0 where none),
+the inertia correction's shift (relative to W's largest diagonal entry), the line
+search's trial points, and the horizon T where it is an unknown.
 """
 from __future__ import annotations
 
@@ -15,14 +17,15 @@ import sys
 import numpy as np
 
 #: The columns, in the order printed; those a step sets come last.
-MEASURED = ("mu", "objective", "primal", "dual", "complementarity", "correction")
+MEASURED = ("mu", "objective", "primal", "dual", "complementarity", "correction", "T")
 STEP = ("alpha", "shift", "trials")
 HEADER = (" iter   objective      inf_pr   inf_du   lg(mu)  compl    KKT corr  alpha     "
           "lg(shift)  ls")
 
 
 class IterationLog:
-    """The rows of one interior point, and its printing."""
+    """The rows of one solve's iterations (``title`` names it on the header), and their
+    printing."""
 
     def __init__(self, title: str, verbose: bool):
         self.title, self.verbose = title, verbose
@@ -38,19 +41,28 @@ class IterationLog:
         self._step = {"alpha": 0.0, "shift": 0.0, "trials": 0}
 
     def correction(self, value: float) -> None:
-        """The iteration's KKT correction."""
+        """The iteration's Newton (for the interior point, KKT) correction."""
         self.rows["correction"][-1] = value
+
+    def horizon(self, value: float | None) -> None:
+        """The horizon T after the iteration's step, where it is an unknown."""
+        if value is not None and self.rows["T"]:
+            self.rows["T"][-1] = value
 
     def trial(self) -> None:
         """One more trial point of the line search."""
         self._step["trials"] = self._step.get("trials", 0) + 1
 
-    def step(self, alpha: float | None = None, shift: float | None = None) -> None:
-        """The step taken (α) and the inertia correction's shift used."""
+    def step(self, alpha: float | None = None, shift: float | None = None,
+             trials: int | None = None) -> None:
+        """The step taken (α), the inertia correction's shift used and the line search's
+        trial points (where not counted one by one with :meth:`trial`)."""
         if alpha is not None:
             self._step["alpha"] = alpha
         if shift is not None:
             self._step["shift"] = shift
+        if trials is not None:
+            self._step["trials"] = trials
 
     def report(self, it: int, verdict: str = "") -> None:
         """Print the iteration's row (with ``verbose``), the header first."""
@@ -61,14 +73,18 @@ class IterationLog:
             return
         self._reported = len(self.rows["mu"])
         if it == 0:
-            print(f"symvi: interior point {self.title}\n{HEADER}", file=sys.stderr)
+            print(f"symvi: {self.title}\n{HEADER}", file=sys.stderr)
         r = {k: v[-1] for k, v in self.rows.items() if v}
         s = self._step
         shift = f"{math.log10(s['shift']):6.1f}" if s.get("shift", 0.0) > 0 else "     -"
+        mu = f"{math.log10(r['mu']):6.1f}" if r["mu"] > 0 else "     -"
+        complementarity = f"{r['complementarity']:8.2e}" if r["complementarity"] == \
+            r["complementarity"] else "       -"
+        horizon = f"  T {r['T']:.10g}" if r["T"] == r["T"] else ""
         print(f"{it:5d}  {r['objective']:14.7e} {r['primal']:8.2e} {r['dual']:8.2e} "
-              f"{math.log10(r['mu']):6.1f}  {r['complementarity']:8.2e} "
-              f"{r['correction']:8.2e}  {s.get('alpha', 0.0):8.2e}  {shift}   "
-              f"{s.get('trials', 0):3d}{verdict}", file=sys.stderr, flush=True)
+              f"{mu}  {complementarity} {r['correction']:8.2e}  {s.get('alpha', 0.0):8.2e}  "
+              f"{shift}   {s.get('trials', 0):3d}{horizon}{verdict}", file=sys.stderr,
+              flush=True)
 
     def history(self) -> dict[str, np.ndarray]:
         """The columns as arrays, one entry per iteration."""
