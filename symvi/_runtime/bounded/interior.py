@@ -110,6 +110,7 @@ class InteriorPoint:
         #: The active sets :meth:`_identified` tried, with the node correction of the try
         self._tried: dict[bytes, float] = {}
         self._last_key = b""        # the active set at the last iteration's test
+        self._gram = [None]         # AᵀA of the last inertia test (optimality._gram)
         self.node_correction = np.inf       # the last iteration's, for :meth:`_identified`
         #: Newton steps of the active-set Newton (:mod:`.polish`) from this interior point,
         #: failed attempts included: the result counts them among its iterations
@@ -619,7 +620,7 @@ class InteriorPoint:
         band = work.shape[1]
         work[2 * bw] += shift * self.nodes[:band]
         verdict = second_order(work, bw, self.rows[:band],
-                               lambda: cholesky_pivot(self.model, work, bw))
+                               lambda: cholesky_pivot(self.model, work, bw), self._gram)
         if not verdict.minimum or rates is None:
             return verdict
         # a free horizon: the bordered matrix's inertia is the band's and the sign of its

@@ -46,33 +46,34 @@ class Curvature:
 
 
 def second_order(ab: np.ndarray, bw: int, constraint_rows: np.ndarray,
-                 pivot=None) -> Curvature:
+                 pivot=None, gram: list | None = None) -> Curvature:
     """The second-order test at a KKT point, from the Newton matrix in the band storage of
     ``assembly.Problem.assemble`` (ab[2 bw + row − col, col] = J[row, col]) and the mask of its
     constraint rows (= multiplier columns). ``pivot``: without constraints, a function
     giving the first non-positive Cholesky pivot of sym(J), or None when there is none
-    (:func:`.band.cholesky_pivot`, in C); by default LAPACK's."""
+    (:func:`.band.cholesky_pivot`, in C); by default LAPACK's. ``gram``: the caller's
+    memo of AᵀA (:func:`_gram`), for tests repeated on the same constraint rows."""
     if pivot is not None and not constraint_rows.any():
         bad = pivot()
         return Curvature(bad is None, 0.0, 0.0 if bad is None else bad)
-    W, AtA, ratio = _blocks(ab, bw, constraint_rows)
+    W, Ab, ratio = _blocks(ab, bw, constraint_rows, gram)
     pivot = -np.inf
-    for k, band in _penalised(W, AtA, ratio):
+    for k, band in _penalised(W, Ab, ratio):
         pivot = _first_bad_pivot(_rounding_shifted(band))
         if pivot is None:
             return Curvature(True, k, 0.0)
     return Curvature(False, PENALTIES[-1] * ratio, pivot)   # ratio is 0 without constraints
 
 
-def _penalised(W, AtA, ratio: float):
-    """(ρ, W + ρAᵀA in lower band storage) for ρ = PENALTIES × ``ratio``: W's band (from
-    :func:`_blocks`) and AᵀA's, converted once, combined per ρ (a sparse sum and
-    conversion per ρ, with :func:`_blocks`' sparse selections, cost the cart-pole
-    swing-up at N = 100 three quarters of its solve)."""
-    if AtA is None:
+def _penalised(W, Ab, ratio: float):
+    """(ρ, W + ρAᵀA in lower band storage) for ρ = PENALTIES × ``ratio``: W's band and
+    AᵀA's (from :func:`_blocks`), combined per ρ (a sparse sum and conversion per ρ, with
+    :func:`_blocks`' sparse selections, cost the cart-pole swing-up at N = 100 three
+    quarters of its solve)."""
+    if Ab is None:
         yield 0.0, W
         return
-    Wb, Ab = W, _lower_band(AtA)
+    Wb = W
     yield 0.0, Wb
     width = max(len(Wb), len(Ab))
     Wp, Ap = np.zeros((width, Wb.shape[1])), np.zeros((width, Ab.shape[1]))
@@ -137,16 +138,15 @@ def convexifying_shift(definite, start: float, first: float = FIRST_SHIFT) -> fl
     return np.inf
 
 
-def _blocks(ab, bw, constraint_rows):
+def _blocks(ab, bw, constraint_rows, gram: list | None = None):
     """(W, AᵀA, ‖W‖/‖AᵀA‖) of the Newton matrix: W symmetrised (symmetric at a KKT point,
-    off it by rounding) in lower band storage in the node ordering; AᵀA sparse, None
-    without constraints. Read from the band's entries directly: a sparse copy of J and
+    off it by rounding) and AᵀA (None without constraints), both in lower band storage
+    in the node ordering. Read from the band's entries directly: a sparse copy of J and
     its row and column selections cost the cart-pole swing-up at N = 100 half its solve
-    (the interior point's inertia tests call this on every iteration)."""
+    (the interior point's inertia tests call this on every iteration). AᵀA is kept for
+    the same A in ``gram`` (:func:`_gram`): the inertia tests of one iteration share it."""
     if not constraint_rows.any():
         return _node_band(ab, bw), None, 0.0
-    from scipy.sparse import csr_matrix
-
     n = ab.shape[1]
     d = np.arange(-bw, bw + 1)[:, None]               # row − column
     c = np.broadcast_to(np.arange(n), (2 * bw + 1, n))
@@ -165,12 +165,30 @@ def _blocks(ab, bw, constraint_rows):
     W = np.zeros((width + 1, size))
     np.add.at(W, (np.where(low, i - j, j - i), np.where(low, j, i)), w)
     rows = constraint_rows[r] & nodes[c]
-    A = csr_matrix((vals[rows], (np.cumsum(constraint_rows)[r[rows]] - 1, position[c[rows]])),
-                   shape=(int(constraint_rows.sum()), size))
-    AtA = (A.T @ A).tocsr()
-    scale_a = float(np.abs(AtA.diagonal()).max(initial=0.0))
+    Ab = _gram(vals[rows], np.cumsum(constraint_rows)[r[rows]] - 1, position[c[rows]],
+               (int(constraint_rows.sum()), size), gram)
+    scale_a = float(np.abs(Ab[0]).max(initial=0.0))
     ratio = float(np.abs(W[0]).max(initial=0.0)) / scale_a if scale_a > 0 else 0.0
-    return W, AtA, ratio
+    return W, Ab, ratio
+
+
+def _gram(values: np.ndarray, rows: np.ndarray, cols: np.ndarray, shape,
+          last: list | None) -> np.ndarray:
+    """AᵀA in lower band storage for the sparse A of entries ``values`` at (``rows``,
+    ``cols``); ``last``, the caller's one-entry memo ([(key, band)] or [None]): the last
+    one's again where A is the same (the inertia correction's shifts and the minimum
+    test's penalties change W only; the cart-pole swing-up at N = 100 spent 40 % of its
+    solve forming AᵀA)."""
+    from scipy.sparse import csr_matrix
+
+    key = (shape, values.tobytes(), rows.tobytes(), cols.tobytes())
+    if last is not None and last[0] is not None and last[0][0] == key:
+        return last[0][1]
+    A = csr_matrix((values, (rows, cols)), shape=shape)
+    band = _lower_band((A.T @ A).tocsr())
+    if last is not None:
+        last[0] = (key, band)
+    return band
 
 
 def _node_band(ab: np.ndarray, bw: int) -> np.ndarray:
