@@ -20,10 +20,11 @@ its status and an error:
 
 Statuses are printed as returned, with the message of every solve that is not a
 SUCCESS; where rounding limits the accuracy (ILL_CONDITIONED), the solve is repeated as
-its message advises, warm-started with twice the attainable accuracy as xtol. From N = 2000 on both are solved with the lifted system (κ ∝ N² instead of the
-node matrix's N⁴, three times its unknowns: the step from 10³ to 10⁴ costs more than
-tenfold per iteration; the targets apply from 10⁴ on). Each solve runs in a forked process, stopped (and reported so)
-if it has not finished after TIME_LIMIT = 5 minutes.
+its message advises, warm-started with twice the attainable accuracy as xtol. From
+N = 2000 on both are solved with the lifted system (κ ∝ N² instead of the node matrix's
+N⁴, three times its unknowns: the step from 10³ to 10⁴ costs more than tenfold per
+iteration; the targets apply from 10⁴ on). Each solve runs in a forked process, stopped
+(and reported so) if it has not finished after TIME_LIMIT = 5 minutes.
 Targets: t(10⁶)/t(10⁵) and t(10⁵)/t(10⁴) ≤ 12 per iteration (one iteration is O(N),
 DESIGN.md §4); total solve of rigid_body_oc at N = 1000 ≤ 5 ms.
 

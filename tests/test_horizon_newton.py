@@ -110,8 +110,9 @@ def runtime_of(mod, stage: str):
 
 def test_the_border_row_is_the_columns_transpose(models):
     """The design's premise: ∂G/∂(node variation) = ∂R/∂T (R the gradient of ℒ, G its
-    T-derivative; both times T in σ = log T), measured on the cart-pole with random multipliers at a non-optimal
-    path, G differentiated along random corrections by central differences."""
+    T-derivative; both times T in σ = log T), measured on the cart-pole with random
+    multipliers at a non-optimal path, G differentiated along random corrections by
+    central differences."""
     mod = models["cart"]
     bordered = runtime_of(mod, "bvp.bordered")
     paths = runtime_of(mod, "core.paths")

@@ -319,9 +319,9 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
         sp.Symbol(k, real=True) if isinstance(k, str) else k for k in parameters}
     unknown = L.free_symbols - known
     if unknown:
+        symbols = list(map(str, groupoid.continuous_symbols(1)))
         raise ModelError(f"undeclared symbol(s) {sorted(map(str, unknown))} in the Lagrangian "
-                         f"of {name!r}; it is L(q, y) in {list(map(str, groupoid.continuous_symbols(1)))}"
-                         f" and parameters")
+                         f"of {name!r}; it is L(q, y) in {symbols} and parameters")
     directions = _actuated(actuated, len(algebroid.y))
     u = _control_symbols(controls, len(directions))
     C = scalar(cost, "cost")

@@ -43,8 +43,9 @@ def bounded(problem, path: Path, options: SolveOptions, cold: bool,
     the barrier problems judged by their residuals and the active set handed to the
     active-set Newton once identified and Mehrotra's barrier rule, the cart-pole
     swing-up from its default guess takes 58 and 51 iterations at N = 100 and 1000
-    (from the optimum without bounds, as before, 21 and 336) and ends at the lower of its two minima, the one IPOPT finds from
-    the same start (20.41 at N = 1000, against 32.29). Where it stalls or runs out of
+    (from the optimum without bounds, as before, 21 and 336) and ends at the lower of
+    its two minima, the one IPOPT finds from the same start (20.41 at N = 1000, against
+    32.29). Where it stalls or runs out of
     iterations, a ``cold`` start goes on from the optimum without bounds
     (:func:`_from_the_unbounded_optimum`): the planar flyer's straight-line guess
     crosses its keep-out disc, a concave constraint whose curvature the barrier's

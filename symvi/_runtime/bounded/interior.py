@@ -8,10 +8,9 @@ parameter falls once the barrier problem is solved to its own accuracy, and only
 its bias exceeds the tolerance: to Mehrotra's σ·sᵀz/m, σ = (μ_aff/μ)³ from the
 affine-scaling correction the SUCCESS rule computes anyway (:meth:`InteriorPoint.probed`),
 at most the monotone rule's κμ (:func:`.barrier.next_barrier`; ``mu_strategy``). With it
-the iterations at N = 100, 1000 and 10⁴: the pure minimum-time double integrator 31, 36,
-43 (monotone 59, 64, 98), the minimum-time slew 30, 50, 41 (49, 84, 92), the cart-pole
-swing-up 58 and 51 at N = 100 and 1000 (64, 64); steps keep s, z > 0 by the fraction-to-the-boundary rule and are globalised
-by the filter line search of :mod:`.filter_steps` (or, where it finds no step or
+the iterations at N = 100, 1000 and 10⁴: the minimum-time slew 30, 50, 49 (monotone 49,
+84, 92), the cart-pole swing-up 58 and 51 at N = 100 and 1000 (64, 64). Steps keep
+s, z > 0 by the fraction-to-the-boundary rule and are globalised by the filter line search of :mod:`.filter_steps` (or, where it finds no step or
 ``options.line_search`` asks it, as :mod:`.interior_steps` describes). Once the node
 corrections are small the active-set Newton of :mod:`.polish` is tried from the
 iterate (:meth:`InteriorPoint._identified`).
@@ -36,6 +35,7 @@ MAX_ITERATIONS.
 from __future__ import annotations
 
 import math
+
 import numpy as np
 
 from ..bvp.band import cholesky_pivot
@@ -130,9 +130,9 @@ class InteriorPoint:
         c = self.inequalities.values
         self.s = np.maximum(-c, 1e-2 * (1.0 + np.abs(c)))
         path.lam[:, self.s_count:] = self.mu * self.unit / self.s
+        self.curved = True          # whether W has curvature (:meth:`curvature_scale`)
         #: The curvature scale where W has none (pure minimum time, whose Lagrangian is
         #: zero): the barrier's GᵀΣG at μ = 1 at the start, fixed for the solve
-        self.curved = True          # whether W has curvature (:meth:`curvature_scale`)
         self.barrier_scale = float((self.unit * self.squared_gradients() / self.s ** 2).max())
 
     @property
@@ -542,17 +542,17 @@ class InteriorPoint:
 
     def _barrier_error(self, delta, dz, path: Path) -> float:
         """The barrier problem's remaining error: its full Newton correction in the node
-        corrections, λ and z. Not in the slacks: Δs = −(c + s) − GΔη carries Δη's noise
-        amplified by G (∂u/∂η ∝ 1/h² for controls), and s is c's function anyway."""
+        corrections, λ and z, measured as the tolerance reads it
+        (:meth:`.assembly.Problem.correction_norm` of Δ, and ‖Δz‖∞). Not in the slacks:
+        Δs = −(c + s) − GΔη carries Δη's noise amplified by G (∂u/∂η ∝ 1/h² for
+        controls), and s is c's function anyway."""
         return max(self.problem.correction_norm(delta, path),
                    float(np.abs(dz).max(initial=0.0)))
 
     def kkt_norm(self, kkt: np.ndarray, path: Path) -> float:
-        """The measure of a :meth:`kkt_correction` (Δη, Δλ, Δz) compared with the
-        tolerance: :meth:`.assembly.Problem.correction_norm` of its Δ, and ‖Δz‖∞."""
+        """:meth:`_barrier_error`'s measure of a :meth:`kkt_correction` (Δη, Δλ, Δz)."""
         n = kkt.size - self.z(path).size
-        return max(self.problem.correction_norm(kkt[:n], path),
-                   float(np.abs(kkt[n:]).max(initial=0.0)))
+        return self._barrier_error(kkt[:n], kkt[n:], path)
 
     def _record(self, path: Path, dual: float, eq: float) -> None:
         c, z = self.inequalities.values, self.z(path)
@@ -585,10 +585,9 @@ class InteriorPoint:
                                      rates)
             if verdict.minimum:
                 return Status.SUCCESS, message
-        if finite and self.inequalities.evaluate(path, self.problem.p, self.problem.step(path),
-                                                 with_jacobian=True) \
-                and (self.z(path)[active > 0] > self.xtol * (1.0 + self.problem.size(path))).all() \
-                and fixes_every_unknown(self, ab, bw, active > 0, rates):
+        # the penalty tests above evaluated c and G at path (add_barrier)
+        positive = self.z(path)[active > 0] > self.xtol * (1.0 + self.problem.size(path))
+        if finite and positive.all() and fixes_every_unknown(self, ab, bw, active > 0, rates):
             return Status.SUCCESS, f"{message}; a vertex: the active inequalities fix every unknown"
         pivot = "" if verdict is None else f" (Cholesky pivot {verdict.pivot:.1e})"
         if not self.curved:

@@ -4,8 +4,8 @@ of the whole-trajectory system, bordering its band.
 With h = T/N, the stationarity of ℒ = Σ_w [L_d + λ·Φ_d] + ν·ψ + ρT in T is one more
 equation, G = ∂ℒ/∂T = (1/N) Σ_w ∂ℒ_w/∂h + ρ = 0, the derivatives at fixed groupoid
 elements (the compiled ``horizon`` kernel, by the envelope theorem the dJ*/dT + ρ of the
-outer iteration, :mod:`.horizon`, now an option and a fallback). Its Newton system
-borders the band,
+outer iteration, :mod:`.horizon`, now an option and a fallback). Its Newton system borders
+the band,
 
     [ J   b ] [Δ ]     [ R ]
     [ bᵀ  d ] [ΔT] = − [ G ],
@@ -286,7 +286,8 @@ class HorizonProblem(Problem):
         :attr:`corner_weight`): with the band's inertia right, the bordered matrix's is
         right iff it is positive (Haynsworth)."""
         b, d = self.border
-        return d + shift * self.corner_weight - float(b @ self._solved_column(ab, bw, shift, None, None))
+        column = self._solved_column(ab, bw, shift, None, None)
+        return d + shift * self.corner_weight - float(b @ column)
 
     def schur_with(self, work: np.ndarray, bw: int, column: np.ndarray, corner: float) -> float:
         """corner − columnᵀ M⁻¹ column, M the band matrix in ``work`` (left intact): the

@@ -67,17 +67,15 @@ def second_order(ab: np.ndarray, bw: int, constraint_rows: np.ndarray,
 
 def _penalised(W, Ab, ratio: float):
     """(ρ, W + ρAᵀA in lower band storage) for ρ = PENALTIES × ``ratio``: W's band and
-    AᵀA's (from :func:`_blocks`), combined per ρ (a sparse sum and conversion per ρ, with
-    :func:`_blocks`' sparse selections, cost the cart-pole swing-up at N = 100 three
-    quarters of its solve)."""
+    AᵀA's (from :func:`_blocks`), combined per ρ as band arrays (a sparse sum and
+    conversion per ρ, with :func:`_blocks`' sparse selections, cost the cart-pole
+    swing-up at N = 100 three quarters of its solve)."""
+    yield 0.0, W
     if Ab is None:
-        yield 0.0, W
         return
-    Wb = W
-    yield 0.0, Wb
-    width = max(len(Wb), len(Ab))
-    Wp, Ap = np.zeros((width, Wb.shape[1])), np.zeros((width, Ab.shape[1]))
-    Wp[:len(Wb)], Ap[:len(Ab)] = Wb, Ab
+    width = max(len(W), len(Ab))
+    Wp, Ap = np.zeros((width, W.shape[1])), np.zeros((width, Ab.shape[1]))
+    Wp[:len(W)], Ap[:len(Ab)] = W, Ab
     for k in PENALTIES[1:]:
         yield k * ratio, Wp + (k * ratio) * Ap
 
