@@ -60,6 +60,61 @@ def test_lifted_steps_are_the_newton_steps(compiled, name):
         assert np.abs(got - expected).max() <= 1e-9 * np.abs(expected).max(), shift
 
 
+def barrier_systems(mod, N: int, seed: int = 0):
+    """The node and the lifted Problem of a bounded model at its example's cubic guess,
+    with random bound multipliers z and slacks s: each assembled with the barrier's
+    weights z/s, the node band given GᵀΣG and Gᵀ(zc + μ)/s by ``add_barrier``."""
+    ex, model = get(mod.model.name).example, mod.model
+    h, p = ex.h * ex.n_steps / N, model.params(None)
+    paths = runtime_of(mod, "core.paths")
+    path = paths.initial_path(model, ex.start, ex.end, N, None, p, h)
+    rng, s_count = np.random.default_rng(seed), model.constraints
+    z = rng.uniform(0.1, 1.0, path.lam[:, s_count:].shape)
+    path.lam[:, s_count:] = z
+    slack = rng.uniform(0.1, 1.0, z.shape)
+    inequalities = runtime_of(mod, "bounded.barrier").Inequalities(model, N + 1)
+    out = []
+    for lifted in (False, True):
+        problem = runtime_of(mod, "bvp.assembly").Problem(model, p, h, lifted=lifted)
+        res, ab, bw, finite = problem.assemble(path, True, z / slack)
+        assert finite and inequalities.add_barrier(path, p, h, z, slack, 0.1, res, ab)
+        out.append((problem, res, ab, bw))
+    return out
+
+
+@pytest.mark.parametrize("name", ["cart_pole_swing_up", "spacecraft_slew", "planar_flyer"])
+def test_lifted_barrier_steps_are_the_interior_point_steps(compiled, name):
+    """With inequalities the lifted windows carry z·∇²c and the eliminated slack and
+    multiplier steps JᵀΣJ in the windows' coordinates: the interior point's reduced
+    step is the node system's, J + GᵀΣG, on a pair groupoid with constraints (the
+    swing-up: the pole's equation per window, force and track limits), on SO(3) (the
+    slew's torque and rate limits) and on an action groupoid (the flyer's keep-out disc
+    on its base point), with and without the inertia correction's shift."""
+    mod = compiled(name)
+    assert mod.INFO.lifted and mod.INFO.inequalities
+    (node, res, ab, bw), (lifted, _, _, _) = barrier_systems(mod, 40)
+    for shift in (0.0, 3.0):
+        expected = node.solve(ab, bw, -res, shift)
+        got = lifted.solve(ab, bw, -res, shift)
+        assert np.abs(got - expected).max() <= 1e-8 * np.abs(expected).max(), shift
+
+
+def test_lifted_barrier_inertia_counts_the_reduced_eigenvalues(compiled):
+    """The lifted verdict on J + GᵀΣG + s·I, at shifts s = −cut between its smallest
+    eigenvalues and below them (the slew at the cubic guess, random z and s): exactly the
+    eigenvalues below the cut are counted — the interior point's inertia test where J's
+    band Cholesky cannot resolve W's smallest eigenvalue (N ≥ 2000)."""
+    mod = compiled("spacecraft_slew")
+    (_, _, ab, bw), (lifted, _, _, _) = barrier_systems(mod, 30, seed=1)
+    J = dense_jacobian(ab, bw)
+    eigenvalues = np.linalg.eigvalsh(0.5 * (J + J.T))
+    gaps = 0.5 * (eigenvalues[:-1] + eigenvalues[1:])
+    for cut in [*gaps[:4], eigenvalues[0] - 1.0]:
+        minimum, excess = lifted.lifted_system.minimum(-cut)
+        below = int((eigenvalues < cut).sum())
+        assert (excess, minimum) == (below, below == 0), (cut, excess, below)
+
+
 def equilibrated(A: np.ndarray, sweeps: int = 30) -> np.ndarray:
     """Ruiz's row and column equilibration: the scaling a pivoting LU does not feel."""
     r, c = np.ones(A.shape[0]), np.ones(A.shape[1])

@@ -382,16 +382,20 @@ def fibre_sources(dm: DiscreteModel) -> tuple[int, ...]:
     The lifted Newton system takes the increments u_k of the elements as unknowns beside
     the nodes: a group factor's fibre hξ is one (−1), a pair factor's fibre q_{k+1} is
     measured from its base coordinate q_k (its index; u = q_{k+1} − q_k). It exists for
-    second-order whole-trajectory models without inequalities, with or without
-    constraints, whose fibres are
+    second-order whole-trajectory models, with or without constraints and inequalities
+    (the bound multipliers weigh the inequalities in the window Hessians; the barrier's
+    GᵀΣG joins the node rows at run time, ``symvi_lifted_barrier``), whose fibres are
     each a group increment or the target of a base coordinate (pair, matrix-group and
     action factors: an action's base point Γ_{k+1} = Γ_k·τ(hξ_k) is the source of no
     fibre, so the change of coordinates to increments stays linear); () otherwise,
     and with end conditions other than fixed (their unknown end nodes have no lifted rows
-    yet: the node system solves them at every N), and for orders above 2 (the lifted rows
-    are written for windows of two elements).
+    yet: the node system solves them at every N), for orders above 2 (the lifted rows
+    are written for windows of two elements), and for pure minimum time (a zero
+    Lagrangian: the lifted rows would hold the barrier's weights alone, and its interior
+    point, verified at a vertex on the node system, reached SUCCESS in 50 iterations at
+    N = 10⁴ on the node system against a SADDLE short of the vertex on the lifted one).
     """
-    if dm.order != 2 or dm.inequalities or dm.end_free:
+    if dm.order != 2 or dm.end_free or dm.pure_minimum_time:
         return ()
     return increment_sources(dm)
 
@@ -400,9 +404,8 @@ def increment_sources(dm: DiscreteModel) -> tuple[int, ...]:
     """:func:`fibre_sources` whether or not the model has inequalities: the coordinates
     whose differences the residual is evaluated from (:func:`_in_increments`), for every
     order from 2 (an order-k residual rounds like ε|q|/h^{2k−1} from the nodes). A bounded
-    model has no lifted solve (its window Hessians would need the inequalities'
-    multipliers), but its residual needs the differences as much: evaluated from the
-    nodes, the cart-pole swing-up's rounded like the unbounded cart-pole's times 10³ at
+    model's residual needs the differences as much as its lifted solve: evaluated from
+    the nodes, the cart-pole swing-up's rounded like the unbounded cart-pole's times 10³ at
     N = 1000 in the directions its Newton matrix amplifies (rounding floors 1e-7 against
     1e-10), and its solves ended ILL_CONDITIONED there."""
     g = dm.groupoid
@@ -490,16 +493,18 @@ def _in_increments(kernel: Kernel, st: _Stencil, sources: Sequence[int]) -> Kern
 
 def _lifted_kernels(dm: DiscreteModel, engine: "_Engine", window: _Stencil,
                     one: _Stencil) -> list[Kernel]:
-    """The window Hessian of ℓ = L_d + λ·Φ_d (the window's multipliers last) and the
+    """The window Hessian of ℓ = L_d + λ·Φ_d + z·c (the window's multipliers last; the
+    bound multipliers z, eliminated from the Newton system, are inputs only) and the
     derivatives of the node variations contracted with a covector: with them the lifted
     system is assembled (``templates/lifted.c.j2``). The window's named base points
     (an action's x_{w+1} = β(x_w, f_w)) are substituted, so that the Hessian carries
     their chain rule."""
     g = dm.groupoid
     lams = tuple(sp.Dummy(f"mult_{a}", real=True) for a in range(len(dm.multipliers)))
+    zs = tuple(sp.Dummy(f"bound_{a}", real=True) for a in range(len(dm.inequalities)))
+    weighed = engine.window_values(window, 0, dm.window_constraints)
     augmented = engine.lagrangian(window, 0) + sum(
-        (l * c for l, c in zip(lams, engine.window_values(window, 0, dm.constraints))),
-        sp.S.Zero)
+        (l * c for l, c in zip(lams + zs, weighed)), sp.S.Zero)
     for symbol, value in reversed(window.definitions):
         augmented = augmented.xreplace({symbol: value})
     z = window.z + lams
@@ -508,9 +513,11 @@ def _lifted_kernels(dm: DiscreteModel, engine: "_Engine", window: _Stencil,
     cv = sp.Matrix(c)
     duals = tuple((name, jacobian(side(one.xs[0], one.fs[0], dm.step).T * cv, one.z))
                   for name, side in (("left", g.left), ("right", g.right)))
-    return [Kernel(KernelName.WINDOW_HESSIAN, z, (("gradient", gradient), ("hessian", hessian)),
-                   "gradient and Hessian of L_d + lambda.Phi_d on one window (x_w, f_w, "
-                   "f_{w+1}, lambda_w)", along=False),
+    return [Kernel(KernelName.WINDOW_HESSIAN, z + zs,
+                   (("gradient", gradient), ("hessian", hessian)),
+                   "gradient and Hessian of L_d + lambda.Phi_d + z.c on one window along "
+                   "(x_w, f_w, f_{w+1}, lambda_w), the bound multipliers z_w given last",
+                   along=False),
             Kernel(KernelName.VARIATIONS_DUAL, one.z + c, duals,
                    "d/d(x, f) of left(x, f)^T c and right(x, f)^T c: the curvature of the node "
                    "variations along a covector c", along=False)]

@@ -156,7 +156,7 @@ class InteriorPoint:
         """Assemble the reduced system at ``path``: (res, ab, bw, and the stencil
         residual's norms on the node and constraint rows), or None where something is
         not finite."""
-        res, ab, bw, finite = self.problem.assemble(path, True)
+        res, ab, bw, finite = self.problem.assemble(path, True, self.z(path) / self.s)
         dual = float(np.abs(res[self.nodes]).max(initial=0.0))
         eq = float(np.abs(res[self.rows]).max(initial=0.0))
         self.stencil = res.copy()
@@ -612,6 +612,8 @@ class InteriorPoint:
         (band storage, left intact) and G the inequalities' gradients at ``path``; with a
         free horizon, ``rates`` the inequalities' g_σ there (else None) and the border
         of the last assembly, at ``path``, W's."""
+        if self.problem.lifted_system is not None and self.curved:
+            return self._lifted_curvature(weight, rates, shift)
         problem, work = self.problem, np.array(hessian, order="F")
         weight = np.ascontiguousarray(weight)
         self.inequalities.add_barrier(path, problem.p, problem.step(path), weight,
@@ -629,6 +631,29 @@ class InteriorPoint:
         schur = problem.schur_with(work, bw, column, d + float((weight * rates ** 2).sum())
                                    + shift * problem.corner_weight)
         return verdict if schur > 0 else Curvature(False, verdict.rho, schur)
+
+    def _lifted_curvature(self, weight: np.ndarray, rates: np.ndarray | None,
+                          shift: float) -> Curvature:
+        """:meth:`curvature` from the lifted system's inertia (:meth:`.lifted.
+        LiftedSystem.minimum`), its barrier weighed by ``weight``; with a free horizon,
+        and the Schur complement of the border through the lifted system's solve. Where
+        the lifted system solves the steps (N ≥ 2000) W's band Cholesky cannot tell W's
+        smallest eigenvalue (≈ hπ⁴) from its rounding (≈ ε·16/h³): the shift that test
+        asked for at every iteration slowed the cart-pole swing-up's Newton at N = 10⁴
+        to linear convergence (MAX_ITERATIONS; 51 iterations with this test)."""
+        lifted = self.problem.lifted_system
+        if not lifted.weigh(weight):
+            return Curvature(False, 0.0, np.nan)
+        minimum, excess = lifted.minimum(shift)
+        if not minimum or rates is None:
+            return Curvature(minimum, 0.0, float(excess))
+        b, d = self.problem.raw
+        column = b + self.inequalities.transposed(weight * rates, self.blocks, self.width)
+        mask = self.nodes[:len(column)].astype(float)
+        solved = lifted.solve(column, shift, mask)
+        schur = d + float((weight * rates ** 2).sum()) + shift * self.problem.corner_weight \
+            - float(column @ solved)
+        return Curvature(schur > 0, 0.0, schur)
 
     def squared_gradients(self) -> np.ndarray:
         """|∇c_j|² per window and inequality: the penalties on the active ones are
@@ -652,12 +677,16 @@ class InteriorPoint:
         ended in MAX_ITERATIONS and one at a saddle; with it all 8 succeed."""
         weight = np.minimum(self.z(path) / self.s, CAP * self.scale / self.squared_gradients())
         shift = start
-        while shift <= MAX_SHIFT:
-            if self.curvature(path, self.hessian, bw, weight, self.rates,
-                              shift * self.scale).minimum:
-                return shift
-            shift = next_shift(shift, self.first_shift)
-        return np.inf
+        try:
+            while shift <= MAX_SHIFT:
+                if self.curvature(path, self.hessian, bw, weight, self.rates,
+                                  shift * self.scale).minimum:
+                    return shift
+                shift = next_shift(shift, self.first_shift)
+            return np.inf
+        finally:        # the step's own weights back in the lifted system, for its solve
+            if self.problem.lifted_system is not None:
+                self.problem.lifted_system.weigh(self.z(path) / self.s)
 
     def _bounds_verified(self, path: Path, message: str) -> tuple[Status, str]:
         """(status, message) of a SUCCESS, checked once more at the returned ``path``:
@@ -697,3 +726,4 @@ class InteriorPoint:
             end_multipliers=path.nu[:model.end_count].copy() if model.end_count else None,
             inequalities=self.inequalities.names,
             history=self.log.history())
+

@@ -59,12 +59,13 @@ class PenalisedProblem(Problem):
         self.inequalities, self.rho = inequalities, rho
         self.first_shift = base.first_shift
 
-    def assemble(self, path: Path, with_jacobian: bool):
-        res, ab, bw, finite = super().assemble(path, with_jacobian)
+    def assemble(self, path: Path, with_jacobian: bool, weights: np.ndarray | None = None):
         ineq = self.inequalities
-        finite = finite and ineq.evaluate(path, self.p, self.h)   # add_barrier: G
+        finite = ineq.evaluate(path, self.p, self.h)      # which rows the penalty weighs
+        violated = np.ascontiguousarray(self.rho * (ineq.values > 0.0))
+        res, ab, bw, assembled = super().assemble(path, with_jacobian, violated)
+        finite = finite and assembled
         if finite:
-            violated = np.ascontiguousarray(self.rho * (ineq.values > 0.0))
             finite = ineq.add_barrier(path, self.p, self.h, violated, np.ones_like(violated),
                                       0.0, res, ab if with_jacobian else None)
         if with_jacobian:

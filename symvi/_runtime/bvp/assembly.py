@@ -78,7 +78,11 @@ class Problem:
         terms = self.model.along_vector(Kernel.LAGRANGIAN, path.x, path.f, self.h, self.p)
         return float(terms.sum()), float(np.abs(terms).sum()) * 64 * np.finfo(float).eps
 
-    def assemble(self, path: Path, with_jacobian: bool):
+    def assemble(self, path: Path, with_jacobian: bool, weights: np.ndarray | None = None):
+        """(R, J in band storage or None, its bandwidth, whether both are finite) at
+        ``path``; with ``weights`` (an interior point's z/s per window and inequality)
+        the lifted system, where it is used, holds the barrier's GᵀΣG too (the node
+        band gets it from :meth:`.barrier.Inequalities.add_barrier`)."""
         m, n_nodes = self.model, path.x.shape[0]
         unknown = int(m.lib.symvi_bvp_unknowns(n_nodes))
         bw = int(m.lib.symvi_bvp_bandwidth())
@@ -99,7 +103,8 @@ class Problem:
         if with_jacobian and self._uses_lifted(n_nodes):
             if self._lifted is None or self._lifted.n_nodes != n_nodes:
                 self._lifted = LiftedSystem(m, n_nodes, self.gauge)
-            code = code if self._lifted.assemble(path, self.p, self.h) else 1
+            code = code if self._lifted.assemble(path, self.p, self.h,
+                                                 weights=weights) else 1
         if with_jacobian:
             self._last = (path, (res, ab, bw, code == 0))
         return res, ab, bw, code == 0

@@ -218,9 +218,9 @@ class HorizonProblem(Problem):
         timed = self.time_cost(path) * path.T
         return cost + timed, noise + 64 * np.finfo(float).eps * abs(timed)
 
-    def assemble(self, path: Path, with_jacobian: bool):
+    def assemble(self, path: Path, with_jacobian: bool, weights: np.ndarray | None = None):
         self._at(path)
-        res, ab, bw, finite = super().assemble(path, with_jacobian)
+        res, ab, bw, finite = super().assemble(path, with_jacobian, weights)
         G = self.horizon_gradient(path) if finite else np.nan
         res = np.append(res, path.T * G)        # the equation in σ = log T
         finite = finite and bool(np.isfinite(res[-1]))

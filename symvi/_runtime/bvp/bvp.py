@@ -20,7 +20,7 @@ from typing import Mapping
 import numpy as np
 
 from ..core import arguments
-from . import boundary_states
+from . import boundary_states, sequence
 from .assembly import Problem
 from .bordered import HorizonProblem
 from .band import cholesky_pivot
@@ -31,7 +31,7 @@ from ..core.model_info import Kernel
 from .newton import newton
 from .optimality import second_order
 from ..core.options import SolveOptions
-from ..core.paths import Path, initial_path
+from ..core.paths import Path, Resampled, initial_path
 from ..core.results import BVPResult, Status
 from ..core.storage import check_path_memory as check_memory
 
@@ -95,7 +95,11 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
         positions (in τ-coordinates at g_{r−1} on groups, the base points moved along;
         the chord when r = 1, as there are no end velocities), and
         ``"chord"`` the positions only: g_{r−1} τ(s·τ⁻¹(g_{r−1}⁻¹ g_{N−r+1})).
-        Multipliers start at zero. Or a previous :class:`BVPResult` with the same
+        Multipliers start at zero. With no guess of its own (None, ``"cubic"``,
+        ``"chord"``) a solve of many steps (by default N ≥ 2000) starts from the
+        solution at a few (250) resampled, with its multipliers and active set, where
+        the boundary data carry to that step (mesh sequencing, :mod:`.sequence`; the
+        result counts both solves' iterations). Or a previous :class:`BVPResult` with the same
         number of steps (a warm start: other boundary data, other parameters, a
         continuation): its free nodes, its multipliers, and its fibres where both nodes
         are unchanged; with bounds also its bound multipliers and active set, from which
@@ -141,6 +145,14 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
     options = SolveOptions.of(options, dict(maxiter=maxiter, xtol=xtol, ftol=ftol) | keywords,
                               "solve_bvp")
     check_memory(model, N + from_states)
+    if sequence.applies(model, N, guess, options):
+        def plain(start, end, steps, step, guess, options):
+            return solve_bvp(model, start, end, steps, step, params, guess=guess,
+                             options=options)
+        result = sequence.sequenced(plain, model, start, end, N, h, params, guess, options,
+                                    from_states)
+        if result is not None:
+            return result.raise_for_status() if raise_on_failure else result
     if from_states:
         if isinstance(guess, BVPResult) and guess.t_states is not None \
                 and len(guess.t_states) - 1 != N:
@@ -185,8 +197,10 @@ def fixed_horizon(model, start, end, N: int, h: float, p, guess,
         from ..bounded.bounded import bounded, bounded_horizon
         check_intervals(model, path, p, h)
         check_boundary_data(model, path, p, h)
-        # a previous result that failed is a guess of nodes only (core.paths.initial_path)
-        cold = not (isinstance(guess, BVPResult) and guess.success)
+        # a previous result that failed is a guess of nodes only (core.paths.initial_path);
+        # a solution at another N resampled is a warm start where it carries its active set
+        cold = not ((isinstance(guess, BVPResult) and guess.success)
+                    or (isinstance(guess, Resampled) and guess.active is not None))
         active = None if cold or guess.active is None \
             or guess.active.shape != path.lam[:, model.constraints:].shape else guess.active
         solve = bounded_horizon if path.T is not None else bounded

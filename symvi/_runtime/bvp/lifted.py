@@ -15,7 +15,10 @@ refined (at most :data:`REFINEMENTS` times) while its componentwise backward err
 exceeds 4ε, so that at N = 10⁶ (κ ≈ 10¹³) the steps stay accurate: cubic_spline
 converges within 2e-11 of the exact cubic at N = 10⁶ and 3e-12 at 10⁵, where J's LU
 reached 4e-5. It has three times J's unknowns and a band of 5n − 1 diagonals on either
-side instead of 3n − 1, so it is used where J loses accuracy (:data:`LIFT_FROM`).
+side instead of 3n − 1, so it is used where J loses accuracy (:data:`LIFT_FROM`). With
+inequalities the windows carry z·c in their Hessians and the interior point's eliminated
+slack and multiplier steps JᵀΣJ (``weights``), and its inertia is the interior point's
+test (``bounded/interior.py``).
 """
 from __future__ import annotations
 
@@ -63,18 +66,37 @@ class LiftedSystem:
         self._scales = tuple(np.zeros(size) for _ in range(4))
         self._pivots = np.zeros(size, dtype=np.intc)
 
-    def assemble(self, path, p, h: float, gauged: bool = True) -> bool:
+    def assemble(self, path, p, h: float, gauged: bool = True,
+                 weights: np.ndarray | None = None) -> bool:
         """The lifted matrix at ``path``, with the gauge rows (:meth:`.gauge.Gauge.
-        replace_rows`, the gauge updated at ``path``) unless not ``gauged``; False on a
-        non-finite entry."""
+        replace_rows`, the gauge updated at ``path``) unless not ``gauged``, and with
+        an interior point's barrier weights z/s (windows × inequalities, unless None):
+        the eliminated slack and multiplier steps GᵀΣG, added to the window Hessians in
+        the windows' coordinates, become J + GᵀΣG once u and μ are eliminated, as the
+        node system's ``symvi_bvp_barrier`` adds them to J. False on a non-finite
+        entry."""
         m = self.model
         self._factored = self._scaling = None
+        if weights is not None:
+            weights = np.ascontiguousarray(weights, dtype=float)
         code = m.lib.symvi_lifted_assemble(m.ptr(path.x), m.ptr(path.f), m.ptr(path.lam),
+                                           m.ffi.NULL if weights is None else m.ptr(weights),
                                            self.n_nodes, m.ptr(p), h, m.ptr(self.band.T))
-        self._at = (path, p, h, gauged and self.gauge is not None)
+        self._at = (path, p, h, gauged and self.gauge is not None, weights)
         if self._at[3]:
             self.gauge.replace_rows(self.band, self.bw, self.gauge_rows)
         return code == 0
+
+    def weigh(self, weights: np.ndarray | None) -> bool:
+        """The lifted matrix at the last assembly's path with the barrier ``weights``
+        instead (assembled again only where they differ): an interior point's inertia
+        test weighs the inequalities otherwise than its step. False on a non-finite
+        entry."""
+        path, p, h, gauged, old = self._at
+        if old is weights or (old is not None and weights is not None
+                              and np.array_equal(old, weights)):
+            return True
+        return self.assemble(path, p, h, gauged, weights)
 
     def solve(self, rhs: np.ndarray, shift: float = 0.0,
               shifted: np.ndarray | None = None, lam: np.ndarray | None = None) -> np.ndarray:
@@ -176,13 +198,13 @@ class LiftedSystem:
         J).
         """
         if self._at is not None and self._at[3]:    # the KKT matrix, without gauge rows
-            path, p, h, _ = self._at
-            self.assemble(path, p, h, gauged=False)
+            path, p, h, _, weights = self._at
+            self.assemble(path, p, h, gauged=False, weights=weights)
             try:
                 return self._count(shift)
             finally:        # the gauge rows back, for the solves
                 self.gauge.replace_rows(self.band, self.bw, self.gauge_rows)
-                self._at = (path, p, h, True)
+                self._at = (path, p, h, True, weights)
         return self._count(shift)
 
     def _count(self, shift: float) -> tuple[bool, int]:

@@ -252,6 +252,12 @@ class SolveOptions(Options):
         arguments.iterations)
     polish_rounds: int = option(8, (
         "active sets the active-set Newton tries before it gives up"), arguments.iterations)
+    coarse: int = option(250, (
+        "mesh sequencing: a solve of N ≥ 8·coarse steps from no guess of its own (guess "
+        "None, 'cubic' or 'chord') starts from the solution at `coarse` steps, resampled "
+        "on the groupoid (boundary data: States, or ends at rest, or a pair groupoid's "
+        "nodes); the result counts both solves' iterations; 0: from the guess"),
+        lambda value, what: arguments.count(value, what, 0, arguments.INT_MAX))
     horizon_method: str = option("newton", (
         "how a free horizon is found: 'newton' (T an unknown of the Newton system; with "
         "inequalities, where it fails, the outer iteration follows) or 'secant' (the outer "

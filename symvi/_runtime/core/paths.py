@@ -41,6 +41,22 @@ class Path:
                        lam=self.lam.copy(), nu=self.nu.copy())
 
 
+@dataclass(frozen=True)
+class Resampled:
+    """A start the run time made itself from a solution at another number of steps
+    (:mod:`.bvp.sequence`): free nodes in the layout of :class:`Path` — base points
+    (count, m), configurations (count, Σ d²) — accepted wherever nodes are parsed; and,
+    where the solution had them, every window's multipliers (λ, then the bound
+    multipliers z, the C layout) and active set, a warm start like a previous result's;
+    with an unknown end its last r nodes (x, g), the end's first guess."""
+
+    x: np.ndarray
+    g: np.ndarray
+    lam: np.ndarray | None = None
+    active: np.ndarray | None = None
+    last: tuple[np.ndarray, np.ndarray] | None = None
+
+
 def flat_configurations(model, value, count: int, what: str) -> np.ndarray:
     """(count, Σ d²) from one (count, d, d) array per group factor."""
     dims = model.matrix_dims
@@ -63,6 +79,10 @@ def nodes(model, value, count: int, what: str, first: int = 0) -> tuple[np.ndarr
 
 def _parse_nodes(model, value, count: int, what: str) -> tuple[np.ndarray, np.ndarray]:
     m, dims = model.m, model.matrix_dims
+    if isinstance(value, Resampled):
+        return (arguments.finite_array(value.x, (count, m), f"{what} base points"),
+                arguments.finite_array(value.g, (count, sum(d * d for d in dims)),
+                                       f"{what} configurations"))
     if not dims:
         return arguments.finite_array(value, (count, m), f"{what} nodes"), np.zeros((count, 0))
     if m == 0:
@@ -146,6 +166,7 @@ def initial_path(model, start, end, N: int, guess, p, h):
     previous = guess if isinstance(guess, BVPResult) else None
     if model.end_free and end is None:
         ex, eg = _last_nodes(model, previous, r) if previous is not None else \
+            guess.last if isinstance(guess, Resampled) and guess.last is not None else \
             (np.repeat(sx[-1:], r, axis=0), np.repeat(sg[-1:], r, axis=0))
     else:
         ex, eg = nodes(model, end, r, "end", N - r + 1)
@@ -173,6 +194,9 @@ def initial_path(model, start, end, N: int, guess, p, h):
     solved = previous is not None and previous.success
     if solved:
         f, lam = _kept(model, previous, x, g, f, lam, h)
+    elif isinstance(guess, Resampled) and guess.lam is not None \
+            and guess.lam.shape == lam.shape:
+        lam = np.array(guess.lam, dtype=float)
     check_consistent(model, x, f, p, h, "boundary data or guess")
     nu = np.zeros(max(model.end_count, 1))
     if solved and previous.end_multipliers is not None \
