@@ -95,7 +95,7 @@ def _run(args) -> int:
     _print_options(options)
     result = (_solve if ex.whole_trajectory else _integrate)(module, ex, steps, h, params,
                                                              args, options)
-    _outputs(result, model, module, args)
+    _outputs(result, args)
     return 0 if result.success else 1
 
 
@@ -201,14 +201,14 @@ def _solve(module, ex, steps: int, h: float, params: dict, args, options: dict):
     return result
 
 
-def _outputs(result, model, module, args) -> None:
+def _outputs(result, args) -> None:
     """``--output`` (the result's arrays, its ``save``) and ``--plot``."""
     if args.output is not None:
         result.save(args.output)
         print(f"output     {args.output}")
     if args.plot is not None:
         from .plots import plot_result
-        plot_result(result, model, module.INFO, args.plot)
+        plot_result(result, args.plot)
         print(f"plot       {args.plot}")
 
 

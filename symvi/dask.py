@@ -19,8 +19,10 @@ same words as on threads, and no cluster time is spent on it.
 
     from dask.distributed import Client
     import symvi.dask
-    client = Client("scheduler-address:8786")
-    batch = symvi.dask.integrate_many(client, double_pendulum, start, 1000, 0.005)
+
+    if __name__ == "__main__":      # worker processes import the script: start nothing there
+        client = Client("scheduler-address:8786")
+        batch = symvi.dask.integrate_many(client, double_pendulum, start, 1000, 0.005)
 """
 from __future__ import annotations
 

@@ -100,7 +100,9 @@ def assert_same(original, back) -> None:
 def fresh_python(code: str, *args, cwd: Path) -> subprocess.CompletedProcess:
     """``code`` in a new interpreter run from ``cwd``, whose path holds the symvi these
     tests import (as installed) and nothing else of theirs: not the build folder."""
-    env = os.environ | {"PYTHONPATH": str(RESULTS_SOURCE.parents[2])}
+    # the folder holding the symvi package under test (results.py's parents: core,
+    # _runtime, symvi, then it), ahead of an installed one
+    env = os.environ | {"PYTHONPATH": str(RESULTS_SOURCE.parents[3])}
     return subprocess.run([sys.executable, "-c", textwrap.dedent(code), *map(str, args)],
                           capture_output=True, text=True, env=env, cwd=cwd, timeout=300)
 

@@ -232,7 +232,7 @@ def test_changed_default_or_lagrangian_rebuilds(tmp_path):
     stiffer = compile_model(oscillator(4.0), tmp_path)        # ω = 2: x(π) = x(0)
     ext1 = extension_of(tmp_path / "cache_probe")
     assert stiffer.INFO.key != key0 and ext1 != ext0
-    assert stiffer.INFO.defaults == (4.0,)
+    assert stiffer.INFO.defaults == {"k": 4.0}
     # the new default is what the new build uses (no params given)
     r0 = base.integrate([[1.0], [np.cos(h)]], N, h)
     r1 = stiffer.integrate([[1.0], [np.cos(2 * h)]], N, h)

@@ -64,6 +64,21 @@ class _Solve:
         return self.function(model, *args, **options)
 
 
+def result_labels(info: ModelInfo) -> dict:
+    """The ``labels`` of this model's results, plain data (they pickle with the result):
+    the model's name, the declared names of the base coordinates (``x``), velocities
+    (``v``), controls and symmetries, ``INFO.fibre_nodes``, and per matrix-group factor
+    its label and whether it is affine (a last row (0, …, 0, 1) fixed, as on SE(n): its
+    last column is a position)."""
+    def affine(group) -> bool:
+        last = tuple([0.0] * (group.matrix_dim - 1) + [1.0])
+        return any(tuple(map(float, w)) == last for w in group.cofixed)
+    return {"model": info.name, "x": info.coordinate_names, "v": info.velocity_names,
+            "controls": info.control_names, "symmetries": info.symmetries,
+            "fibre_nodes": info.fibre_nodes,
+            "groups": tuple((G.label, affine(G)) for G in info.groups)}
+
+
 class CompiledModel:
     """Wraps the cffi ``ffi``/``lib`` of one generated extension.
 
@@ -96,11 +111,14 @@ class CompiledModel:
         #: The inequalities c ≤ 0 of every window (bounded optimal control), by name.
         self.inequalities: tuple[str, ...] = info.inequalities
         self.parameter_names: tuple[str, ...] = info.parameters
-        self.parameter_defaults: tuple[float, ...] = info.defaults
+        self.parameter_defaults: tuple[float, ...] = tuple(info.defaults.values())
+        #: What a result carries to read itself (its summary, ``plot()``): the declared
+        #: names and how the fibres relate to the nodes.
+        self.labels: dict = result_labels(info)
 
     def __repr__(self) -> str:
         return (f"<symvi model {self.name!r}: {self.info.kind} groupoid, order {self.order}, "
-                f"n={self.n}, parameters {dict(zip(self.parameter_names, self.parameter_defaults))}>")
+                f"n={self.n}, parameters {dict(self.info.defaults)}>")
 
     @property
     def stencil_elements(self) -> int:

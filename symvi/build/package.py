@@ -19,7 +19,7 @@ from ..errors import BuildError
 from .files import write_file, writing
 from ..declaration.symbols import sign
 from .._runtime.core.model_info import VERSION as MODEL_INFO_VERSION
-from .._runtime.core.model_info import GroupInfo, Kernel, KernelInfo, ModelInfo
+from .._runtime.core.model_info import Defaults, GroupInfo, Kernel, KernelInfo, ModelInfo
 
 #: The symvi package folder (its sources are part of the cache key).
 PACKAGE = Path(__file__).resolve().parent.parent
@@ -80,8 +80,11 @@ def info(dm: DerivedModel, key: str, description: str) -> ModelInfo:
         version=MODEL_INFO_VERSION, name=dm.name, kind=dm.kind, order=dm.order,
         source_dim=dm.source_dim, fibre_dim=dm.fibre_dim,
         configuration_dim=dm.c_context.configuration_dim,
-        parameters=tuple(str(s) for s in dm.parameters), defaults=tuple(dm.defaults),
-        parameter_signs=tuple(sign(s) for s in dm.parameters), has_energy=dm.has_energy,
+        parameters=tuple(str(s) for s in dm.parameters),
+        defaults=Defaults((str(s), v) for s, v in zip(dm.parameters, dm.defaults)),
+        parameter_signs=tuple(sign(s) for s in dm.parameters),
+        coordinate_names=dm.coordinate_names, velocity_names=dm.velocity_names,
+        control_names=dm.control_names, has_energy=dm.has_energy,
         initial_layout=dm.initial_layout, whole_trajectory=dm.whole_trajectory,
         lifted=bool(dm.fibre_sources), constraints=dm.constraint_count,
         constraint_names=tuple(dm.constraint_names), unactuated=tuple(dm.unactuated),

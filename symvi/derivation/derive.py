@@ -88,6 +88,11 @@ class DerivedModel:
     #: Number s of constraints per window (multipliers λ^k ∈ R^s) and of controls.
     constraint_count: int = 0
     control_count: int = 0
+    #: The declared names of the base coordinates, of the velocities (one per fibre
+    #: coordinate, :meth:`Groupoid.state_symbols`) and of the controls.
+    coordinate_names: tuple[str, ...] = ()
+    velocity_names: tuple[str, ...] = ()
+    control_names: tuple[str, ...] = ()
     #: :attr:`DiscreteModel.constraint_names`.
     constraint_names: tuple[str, ...] = ()
     unactuated: tuple[int, ...] = ()
@@ -758,6 +763,9 @@ def _derive(dm: DiscreteModel) -> DerivedModel:
                         has_energy=dm.order == 1, fingerprint=dm.fingerprint,
                         initial_layout=g.initial_layout,
                         constraint_count=len(dm.constraints), control_count=len(dm.controls),
+                        coordinate_names=tuple(map(str, g.state_symbols()[0])),
+                        velocity_names=tuple(map(str, g.state_symbols()[1])),
+                        control_names=dm.control_names,
                         constraint_names=dm.constraint_names, unactuated=dm.unactuated,
                         end_free=dm.end_free, end_names=dm.end_names,
                         pure_minimum_time=dm.pure_minimum_time,

@@ -47,6 +47,8 @@ class DiscreteModel:
     unactuated: tuple[int, ...] = ()
     #: Controls at a window's quadrature point (slot coordinates).
     controls: tuple[sp.Expr, ...] = ()
+    #: The controls' declared names (``tau1``, …), one per entry of :attr:`controls`.
+    control_names: tuple[str, ...] = ()
     #: Declared Noether symmetries (:class:`symvi.declaration.symmetry.Symmetry`, base coordinates).
     symmetries: tuple = ()
     #: (name, Z_A) per symmetry Z that makes the constraints exactly dependent (variational
@@ -126,6 +128,7 @@ def discretise(model: "Model") -> DiscreteModel:
                          continuous_lagrangian=model.lagrangian,
                          fingerprint=model.fingerprint(), constraints=constraints,
                          multipliers=multipliers, controls=controls,
+                         control_names=_control_names(system, len(controls)),
                          constraint_names=_constraint_names(model, len(constraints)),
                          unactuated=() if system is None else system.unactuated(g.fibre_dim),
                          symmetries=tuple(model.symmetries), gauges=gauges,
@@ -147,6 +150,13 @@ def _constraint_names(model: "Model", count: int) -> tuple[str, ...]:
         return tuple(f"constraint {k + 1}" for k in range(count))
     names = model.groupoid.component_names()
     return tuple(names[A] for A in system.unactuated(len(names)))
+
+
+def _control_names(system, count: int) -> tuple[str, ...]:
+    """:attr:`DiscreteModel.control_names`: the declared control symbols' names, or
+    ``u1``, … where a system declares none for some of its controls."""
+    declared = () if system is None else tuple(str(u) for u in system.controls)
+    return declared if len(declared) == count else tuple(f"u{i + 1}" for i in range(count))
 
 
 def _on_one_element(model: "Model", system, x, f) -> tuple[tuple[str, sp.Expr], ...]:

@@ -32,6 +32,7 @@ from .newton import newton
 from .optimality import second_order
 from ..core.options import SolveOptions
 from ..core.paths import Path, Resampled, initial_path
+from ..core.progress import ProgressLine
 from ..core.results import BVPResult, Status
 from ..core.storage import check_path_memory as check_memory
 
@@ -60,7 +61,8 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
               maxiter: int = SolveOptions.unset("maxiter"),
               xtol: float = SolveOptions.unset("xtol"),
               ftol: float = SolveOptions.unset("ftol"), options: SolveOptions | None = None,
-              raise_on_failure: bool = False, **keywords) -> BVPResult:
+              raise_on_failure: bool = False, progress: bool | None = None,
+              **keywords) -> BVPResult:
     """Solve for the free nodes (and multipliers) with the first and last r nodes fixed
     (or, with end conditions, only the first).
 
@@ -137,22 +139,40 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
         (:mod:`.interior`, whose docstring states its SUCCESS rule); ``ftol`` is unused.
     raise_on_failure : raise :class:`NewtonError` (carrying the failed result and its
         iteration history) instead of returning a failed result.
+    progress : a line on stderr naming the phase, the iteration and its correction, shown
+        once the solve has run a few seconds (:mod:`..core.progress`) and erased at its
+        end: True, False, or None (the default) for one when stderr is a terminal and
+        ``verbose`` is off (its rows say as much). The batch calls show a bar instead.
     """
-    info = model.info
     from_states = boundary_states.given(start, end)
     N = solve_steps(model, n_steps, from_states)
     h, p = arguments.step_of(h, T, N), model.params(params)
     options = SolveOptions.of(options, dict(maxiter=maxiter, xtol=xtol, ftol=ftol) | keywords,
                               "solve_bvp")
     check_memory(model, N + from_states)
-    if sequence.applies(model, N, guess, options):
-        def plain(start, end, steps, step, guess, options):
-            return solve_bvp(model, start, end, steps, step, params, guess=guess,
-                             options=options)
-        result = sequence.sequenced(plain, model, start, end, N, h, params, guess, options,
-                                    from_states)
-        if result is not None:
-            return result.raise_for_status() if raise_on_failure else result
+    with ProgressLine(f"solve_bvp {model.name}", progress):
+        result = _sequenced(model, start, end, N, h, p, guess, options, from_states) \
+            if sequence.applies(model, N, guess, options) else None
+        if result is None:
+            result = _solve(model, start, end, N, h, p, guess, options, from_states)
+    result = replace(result, labels=model.labels)
+    return result.raise_for_status() if raise_on_failure else result
+
+
+def _sequenced(model, start, end, N: int, h: float, p, guess, options: SolveOptions,
+               from_states: bool) -> BVPResult | None:
+    """:func:`.sequence.sequenced` with :func:`_solve` as each of its solves."""
+    def solve(start, end, steps, step, guess, options):
+        return _solve(model, start, end, steps, step, p, guess, options, from_states)
+    return sequence.sequenced(solve, model, start, end, N, h, p, guess, options,
+                              from_states)
+
+
+def _solve(model, start, end, N: int, h: float, p, guess, options: SolveOptions,
+           from_states: bool) -> BVPResult:
+    """:func:`solve_bvp` once its arguments are checked: from States, with a free
+    horizon, or at the step h."""
+    info = model.info
     if from_states:
         if isinstance(guess, BVPResult) and guess.t_states is not None \
                 and len(guess.t_states) - 1 != N:
@@ -171,7 +191,7 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
             model, p, N, h, options)
     else:
         result = fixed_horizon(model, start, end, N, h, p, guess, options)
-    return result.raise_for_status() if raise_on_failure else result
+    return result
 
 
 def fixed_horizon(model, start, end, N: int, h: float, p, guess,

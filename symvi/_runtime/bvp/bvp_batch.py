@@ -66,7 +66,7 @@ def solve_bvp_many(model, starts, ends, n_steps: int, h=None, params: Mapping | 
                     batch.overrides(b),
                     T=None if batch.horizons is None else float(batch.horizons[b]),
                     guess=None if batch.guesses is None else batch.guesses[b],
-                    options=batch.options)
+                    options=batch.options, progress=False)
             bar.update()
     with Progress(batch.size, "solves", progress) as bar:
         run_threads(work, batch.size, batch.workers, stop)
@@ -103,7 +103,7 @@ def continuation(model, start, end, n_steps: int, h=None, path: Mapping | None =
     with Progress(checked.size, "solves", progress) as bar:
         for point in checked.points:
             result = solve_bvp(model, start, end, checked.n_steps, h, point, T=T,
-                               guess=previous, options=checked.options)
+                               guess=previous, options=checked.options, progress=False)
             results.append(result)
             bar.update()
             if result.success:

@@ -46,11 +46,12 @@ def applies(model, N: int, guess, options) -> bool:
             and (guess is None or isinstance(guess, str)))
 
 
-def sequenced(solve, model, start, end, N: int, h: float, params, guess, options,
+def sequenced(solve, model, start, end, N: int, h: float, p: np.ndarray, guess, options,
               from_states: bool) -> BVPResult | None:
     """The solve at N steps (``solve(start, end, N, h, guess, options)``, the caller's
-    :func:`.bvp.solve_bvp` with sequencing off) from the solution at ``options.coarse``
-    steps resampled; None where the boundary data do not carry to the coarse step."""
+    solve of checked arguments, parameters ``p``) from the solution at
+    ``options.coarse`` steps resampled; None where the boundary data do not carry to the
+    coarse step."""
     Nc = options.coarse
     ends = _coarse_ends(model, start, end, Nc / N, from_states)
     if ends is None:
@@ -62,7 +63,7 @@ def sequenced(solve, model, start, end, N: int, h: float, params, guess, options
         return _combined(coarse, direct, f"the solve at {Nc} steps failed "
                                          f"({coarse.status.name}); from the guess")
     fine_h = coarse.T / N if model.info.free_horizon else h
-    nodes = _resampled(model, coarse, N + from_states, Nc, from_states, params)
+    nodes = _resampled(model, coarse, N + from_states, Nc, from_states, p)
     if nodes is None:
         return _combined(coarse, solve(start, end, N, h, guess, plain),
                          f"the solution at {Nc} steps leaves the retraction's chart "
@@ -102,7 +103,7 @@ def _scaled(model, value, ratio: float, outer: int):
 
 
 def _resampled(model, coarse: BVPResult, steps: int, Nc: int, from_states: bool,
-               params) -> Resampled | None:
+               p: np.ndarray) -> Resampled | None:
     """The free nodes of the fine path (``steps`` elements) on the coarse solution: fine
     node j at time (j − o)h lies at coarse position (j − o)·h/h_c + o, o = ½ from States
     (nodes at the half steps), else 0; None where the resampling leaves the chart."""
@@ -117,7 +118,6 @@ def _resampled(model, coarse: BVPResult, steps: int, Nc: int, from_states: bool,
     where = np.clip((np.arange(steps + 1) - offset) * (Nc / N) + offset, 0.0, count - 1.0)
     x = np.zeros((steps + 1, xc.shape[1]))
     g = np.zeros((steps + 1, gc.shape[1]))
-    p = model.params(params)
     code = model.lib.symvi_path_resample(model.ptr(xc), model.ptr(gc), count,
                                          model.ptr(where), steps + 1, model.ptr(x),
                                          model.ptr(g), model.ptr(p))

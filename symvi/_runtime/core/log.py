@@ -16,6 +16,8 @@ import sys
 
 import numpy as np
 
+from . import progress
+
 #: The columns, in the order printed; those a step sets come last.
 MEASURED = ("mu", "objective", "primal", "dual", "complementarity", "correction", "T")
 STEP = ("alpha", "shift", "trials")
@@ -65,7 +67,10 @@ class IterationLog:
             self._step["trials"] = trials
 
     def report(self, it: int, verdict: str = "") -> None:
-        """Print the iteration's row (with ``verbose``), the header first."""
+        """Print the iteration's row (with ``verbose``), the header first; without it,
+        update the call's progress line (:mod:`.progress`), if it has one."""
+        if not self.verbose:
+            progress.report(lambda: self._progress(it))
         if not self.verbose or not self.rows["mu"]:
             return
         if len(self.rows["mu"]) == self._reported:      # no new row: the verdict alone
@@ -85,6 +90,11 @@ class IterationLog:
               f"{mu}  {complementarity} {r['correction']:8.2e}  {s.get('alpha', 0.0):8.2e}  "
               f"{shift}   {s.get('trials', 0):3d}{horizon}{verdict}", file=sys.stderr,
               flush=True)
+
+    def _progress(self, it: int) -> str:
+        """The progress line's text at iteration ``it``."""
+        correction = self.rows["correction"][-1] if self.rows["correction"] else math.nan
+        return f"{self.title}, iteration {it + 1}, correction {correction:.1e}"
 
     def history(self) -> dict[str, np.ndarray]:
         """The columns as arrays, one entry per iteration."""

@@ -17,11 +17,11 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 from enum import Enum
-from typing import Any, Mapping
+from typing import Any, Iterator, Mapping
 
 #: The schema version of :class:`ModelInfo`: raised whenever a field is added, removed,
 #: renamed or changes meaning, so that a package written with another schema is refused.
-VERSION = 3
+VERSION = 4
 
 
 class ModelInfoError(ValueError):
@@ -63,6 +63,32 @@ def kernel_name(kernel: Kernel | str) -> str:
     """The C stem of ``kernel``: a :class:`Kernel`'s value, or a name as given. Any
     package's :class:`Kernel` (each package holds its own copy of this module)."""
     return kernel.value if isinstance(kernel, Enum) else kernel
+
+
+class Defaults(Mapping):
+    """The parameters' defaults by name, in the order of the parameter vector p: a
+    read-only mapping (``INFO.defaults["l"]``, ``dict(INFO.defaults)``), hashable like the
+    rest of a :class:`ModelInfo`."""
+
+    def __init__(self, items: Mapping[str, float] | Any = ()):
+        pairs = tuple((items.items() if isinstance(items, Mapping) else items))
+        self._items = tuple((str(k), v) for k, v in pairs)
+        self._index = dict(self._items)
+
+    def __getitem__(self, name: str) -> float:
+        return self._index[name]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._index)
+
+    def __len__(self) -> int:
+        return len(self._items)
+
+    def __hash__(self) -> int:
+        return hash(self._items)
+
+    def __repr__(self) -> str:
+        return repr(self._index)
 
 
 @dataclass(frozen=True)
@@ -129,10 +155,17 @@ class ModelInfo:
     configuration_dim: int
     #: The parameters' names, in the order of the parameter vector p.
     parameters: tuple[str, ...]
-    #: Their defaults, in the same order.
-    defaults: tuple[float, ...]
+    #: Their defaults by name (:class:`Defaults`, in the same order).
+    defaults: Defaults
     #: Per parameter: its declared sign assumption (a key of :data:`.signs.SIGNS`) or None.
     parameter_signs: tuple[str | None, ...]
+    #: The declared names of the base coordinates x (m of them; none on a Lie group).
+    coordinate_names: tuple[str, ...]
+    #: The declared names of the velocities, one per fibre coordinate (a pair factor's
+    #: q̇, a group factor's ξ): the velocities of a :class:`State`, in its order.
+    velocity_names: tuple[str, ...]
+    #: The declared names of the controls (optimal control: ``tau1``, …; else none).
+    control_names: tuple[str, ...]
     #: Whether the model has an ``energy`` kernel (first order, autonomous).
     has_energy: bool
     #: How initial data is read into the first elements (a key of
@@ -186,6 +219,9 @@ class ModelInfo:
     description: str
 
     def __post_init__(self) -> None:
+        if tuple(self.defaults) != self.parameters:
+            raise ModelInfoError(f"INFO.defaults names {list(self.defaults)}, not the "
+                                 f"parameters {list(self.parameters)}: recompile the model")
         # the kernels by name, for lookups in O(1) (not a field: no part of the literal,
         # equality or the schema)
         object.__setattr__(self, "_by_name", {k.name: k for k in self.kernels})
@@ -270,6 +306,8 @@ def _value(annotation: str, value: Any, where: str):
             raise ModelInfoError(f"{where} = {value!r} is not a {annotation}: recompile the "
                                  f"model")
         return tuple(_value(a, v, f"{where}[{i}]") for i, (a, v) in enumerate(zip(items, value)))
+    if annotation == "Defaults":
+        return _defaults(value, where)
     nested = {"KernelInfo": KernelInfo, "GroupInfo": GroupInfo}[annotation]
     return _read(nested, value, where)
 
@@ -282,6 +320,15 @@ def _scalar(annotation: str, value: Any, where: str):
     return value
 
 
+def _defaults(value: Any, where: str) -> Defaults:
+    """A mapping of parameter names to numbers as :class:`Defaults`."""
+    if not isinstance(value, Mapping):
+        raise ModelInfoError(f"{where} is a {type(value).__name__}, not a mapping: "
+                             f"recompile the model")
+    return Defaults((_scalar("str", k, f"{where} key"), _scalar("float", v, f"{where}[{k!r}]"))
+                    for k, v in value.items())
+
+
 def _frozen(value: Any, where: str):
     """Nested lists of numbers as nested tuples."""
     if isinstance(value, (list, tuple)):
@@ -292,7 +339,7 @@ def _frozen(value: Any, where: str):
 
 
 def _plain(value: Any):
-    if isinstance(value, dict):
+    if isinstance(value, Mapping):
         return {k: _plain(v) for k, v in value.items()}
     if isinstance(value, (list, tuple)):
         return [_plain(v) for v in value]

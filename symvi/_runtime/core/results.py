@@ -136,6 +136,16 @@ class Status(enum.IntEnum, metaclass=_SharedEnum):
     #: penalty stages reach stopped falling as the penalty grew (:mod:`.penalty`).
     INFEASIBLE = 9
 
+    def __str__(self) -> str:
+        # IntEnum prints its value since Python 3.11; a status reads as its name
+        return self.name
+
+    def __format__(self, spec: str) -> str:
+        # numeric format specs (``{status:d}``, ``{status:>3}`` stays text) keep the value
+        if spec and spec[-1] in "bcdoxXneEfFgG%":
+            return format(int(self), spec)
+        return format(self.name, spec)
+
     def __reduce_ex__(self, protocol):
         return _STATUS, (int(self),)
 
@@ -182,6 +192,24 @@ def _brief(values) -> str:
     last = np.asarray(values[-1])
     return np.array2string(last, precision=6, threshold=9, edgeitems=1 if last.ndim > 1 else 2,
                            separator=", ", max_line_width=10**6).replace("\n", "")
+
+
+def _velocity_or_fibres(result) -> dict:
+    """The last element of ``result``'s path for its one-line summary: its fibres ``f``,
+    except those that copy the element's target node (a pair factor's f = q_{k+1}, which
+    the final ``x`` already shows: ``labels["fibre_nodes"]``), shown instead as the
+    velocity ``v`` = (x_N − x_{N−1})/h where the path's last two nodes are both kept."""
+    nodes = np.asarray((result.labels or {}).get("fibre_nodes", ()), dtype=int)
+    if result.f is None or nodes.size == 0 or not (nodes >= 0).any():
+        return {"f": result.f}
+    copies = nodes >= 0
+    out = {}
+    x, t = result.x, result.t
+    if x is not None and len(x) == len(result.f) + 1 >= 2 and len(t) == len(x):
+        out["v"] = ((x[-1] - x[-2]) / (t[-1] - t[-2]))[None, nodes[copies]]
+    if not copies.all():
+        out["f"] = np.asarray(result.f)[:, ~copies]
+    return out
 
 
 @dataclass(frozen=True)
@@ -241,6 +269,14 @@ class _Result(metaclass=_Shared):
 
     __reduce__ = _reduce
 
+    def plot(self):
+        """This result drawn as a matplotlib ``Figure``, one panel per quantity against
+        time, labelled with the model's declared names: coordinates, world position and
+        attitude of group configurations, velocities, and the controls, energy error or
+        conserved quantities' drift (:mod:`.plotting`; needs matplotlib). Save it with
+        ``fig.savefig("path.png")``."""
+        return importlib.import_module(".plotting", __package__).figure(self)
+
     def _summary(self, counts: str, final: dict) -> str:
         message = self.message if len(self.message) <= 100 else self.message[:99] + "…"
         finals = ", ".join(f"{name} = {_brief(values)}" for name, values in final.items())
@@ -289,9 +325,11 @@ class StepResult(_Result):
     momenta: np.ndarray | None = None
     energy: np.ndarray | None = None
     noether: np.ndarray | None = None
+    labels: dict | None = None
 
     def __repr__(self) -> str:
-        final = {"x": self.x, "f": self.f} | ({"g": self.g} if self.g is not None else {})
+        final = {"x": self.x} | _velocity_or_fibres(self) \
+            | ({"g": self.g} if self.g is not None else {})
         end = f", t = {self.t[-1]:.6g}" if len(self.t) else ""
         return self._summary(f"{len(self.t)} nodes{end}", final)
 
@@ -370,6 +408,7 @@ class BVPResult(_Result):
     end_multipliers: np.ndarray | None = None
     states: State | None = None
     t_states: np.ndarray | None = None
+    labels: dict | None = None
 
     @property
     def T(self) -> float:
@@ -395,8 +434,8 @@ class BVPResult(_Result):
         return [tuple(n for n, a in zip(self.inequalities, row) if a) for row in self.active]
 
     def __repr__(self) -> str:
-        final = {name: getattr(self, name) for name in ("x", "g", "f")
-                 if getattr(self, name) is not None}
+        final = {name: getattr(self, name) for name in ("x", "g") if getattr(self, name)
+                 is not None} | (_velocity_or_fibres(self) if self.f is not None else {})
         cost = "" if self.cost is None else f", cost {self.cost:.6g}"
         if self.t_states is not None:
             return self._summary(f"{len(self.t_states) - 1} steps, {len(self.t_states)} "
@@ -444,6 +483,7 @@ class BatchResult(_Result):
     momenta: np.ndarray | None = None
     energy: np.ndarray | None = None
     noether: np.ndarray | None = None
+    labels: dict | None = None
 
     @classmethod
     def stacked(cls, results: list) -> "BatchResult":
@@ -462,7 +502,7 @@ class BatchResult(_Result):
         messages = tuple(r.message for r in results)
         status, message = cls.summary(statuses, messages)
         return cls(status=status, message=message, statuses=statuses, messages=messages,
-                   lengths=lengths, **arrays)
+                   lengths=lengths, labels=results[0].labels if results else None, **arrays)
 
     @classmethod
     def joined(cls, parts: list) -> "BatchResult":
@@ -484,7 +524,7 @@ class BatchResult(_Result):
                    for k in parts[0].lengths}
         status, message = cls.summary(statuses, messages)
         return cls(status=status, message=message, statuses=statuses, messages=messages,
-                   lengths=lengths, **arrays)
+                   lengths=lengths, labels=parts[0].labels, **arrays)
 
     @staticmethod
     def summary(statuses: np.ndarray, messages, one: str = "trajectory",
@@ -515,7 +555,10 @@ class BatchResult(_Result):
             n = self.lengths[name][b]
             return tuple(v[b, :n] for v in value) if isinstance(value, tuple) else value[b, :n]
         return StepResult(status=Status(self.statuses[b]), message=self.messages[b],
-                          **{name: own(name) for name in _STACKED})
+                          labels=self.labels, **{name: own(name) for name in _STACKED})
+
+    def plot(self):
+        raise TypeError("plot one trajectory of the batch: result[b].plot()")
 
     def __repr__(self) -> str:
         return (f"<BatchResult {self.status.name}: {self.message[:100]!r}; "
@@ -571,6 +614,9 @@ class BVPBatch(_Result):
 
     def save(self, file) -> None:
         raise TypeError("save each solve (result[b].save(...)) or the arrays of stack(...)")
+
+    def plot(self):
+        raise TypeError("plot one solve of the batch: result[b].plot()")
 
     def __repr__(self) -> str:
         return f"<BVPBatch {self.status.name}: {self.message[:100]!r}; {len(self)} solves>"

@@ -52,6 +52,7 @@ class Stacked:
         status, message = BatchResult.summary(self.statuses, self.messages)
         return BatchResult(t=self.t, statuses=self.statuses, messages=tuple(self.messages),
                            lengths=lengths, status=status, message=message,
+                           labels=self.model.labels,
                            **{"g": None, "momenta": None, "energy": None, "noether": None}
                            | arrays)
 

@@ -18,6 +18,7 @@ import numpy as np
 from ..core import arguments
 from ..core.model_info import Kernel
 from ..core.options import StepOptions
+from ..core.progress import ProgressLine
 from ..core.results import State, Status, StepResult
 from ..core.storage import Series, check_memory
 
@@ -44,7 +45,8 @@ def integrate(model, initial, n_steps: int, h: float, params: Mapping[str, float
               *, maxiter: int = StepOptions.unset("maxiter"),
               xtol: float = StepOptions.unset("xtol"), ftol: float = StepOptions.unset("ftol"),
               keep_every: int = 1, quantities: bool = True, raise_on_failure: bool = False,
-              options: StepOptions | None = None, **keywords) -> StepResult:
+              progress: bool | None = None, options: StepOptions | None = None,
+              **keywords) -> StepResult:
     """Integrate ``n_steps`` steps of the discrete Euler–Lagrange equations.
 
     Parameters
@@ -74,6 +76,9 @@ def integrate(model, initial, n_steps: int, h: float, params: Mapping[str, float
         (True); False returns the path alone (those fields None), no work past the
         step loop: on the pendulum they take a fifth of the call's time.
     raise_on_failure : raise :class:`NewtonError` instead of returning a failed result.
+    progress : a line on stderr saying how far the run has come, shown once it has run
+        a few seconds (:mod:`.progress`) and erased at its end: True, False, or None (the
+        default) for one when stderr is a terminal.
     options, keywords : the step's Newton options as one :class:`.options.StepOptions`
         (or a mapping of its fields) instead of ``maxiter``, ``xtol``, ``ftol`` (an
         options object and a keyword for one field are refused together); a keyword
@@ -88,7 +93,7 @@ def integrate(model, initial, n_steps: int, h: float, params: Mapping[str, float
     within a fraction of a second (``KeyboardInterrupt``).
     """
     return run_steps(model, initial, n_steps, h, params, options, keep_every,
-                     raise_on_failure, quantities=quantities,
+                     raise_on_failure, quantities=quantities, progress=progress,
                      keywords=dict(maxiter=maxiter, xtol=xtol, ftol=ftol) | keywords)
 
 
@@ -99,10 +104,10 @@ class Stopped(Exception):
 def run_steps(model, initial, n_steps: int, h: float, params,
               options: StepOptions | None, keep_every: int, raise_on_failure: bool,
               stop: threading.Event | None = None, quantities: bool = True,
-              keywords: Mapping | None = None) -> StepResult:
-    """:func:`integrate` (``options`` and ``keywords`` as there), stopping
-    (:class:`Stopped`) between two chunks once ``stop`` is set: how a batch
-    (:mod:`.batch`) ends its worker threads promptly."""
+              keywords: Mapping | None = None, progress: bool | None = False) -> StepResult:
+    """:func:`integrate` (``options``, ``keywords`` and ``progress`` as there; a batch's
+    members show none), stopping (:class:`Stopped`) between two chunks once ``stop`` is
+    set: how a batch (:mod:`.batch`) ends its worker threads promptly."""
     from_state, K = isinstance(initial, State), model.stencil_elements
     n_steps = step_count(model, n_steps)
     keep = arguments.count(keep_every, "keep_every", 1)
@@ -114,7 +119,8 @@ def run_steps(model, initial, n_steps: int, h: float, params,
     quantities = arguments.flag(quantities, "quantities")
     check_memory(model, n_steps, keep, BUFFER_STEPS if keep > 1 else 0, quantities)
     run = _Run(model, new, keep, p, h, stop, quantities)
-    code, steps, rnorm, iterations = run.loop(z0, g0, options)
+    with ProgressLine(f"integrate {model.name}", progress) as line:
+        code, steps, rnorm, iterations = run.loop(z0, g0, options, line)
     status = Status(code)
     message = outcome(status, n_steps, K, from_state, steps, h, options.maxiter, iterations,
                       rnorm)
@@ -251,9 +257,11 @@ class _Run:
             self.g = np.zeros((K + steps if G else 1, max(G, 1)))
             self.iters = np.zeros(steps, np.intc)
 
-    def loop(self, z0, g0, options: StepOptions) -> tuple[int, int, float, int]:
-        """Run the chunks, each step's Newton under ``options``; returns (status code,
-        steps done, last residual norm, Newton iterations of the last step tried)."""
+    def loop(self, z0, g0, options: StepOptions,
+             line: ProgressLine | None = None) -> tuple[int, int, float, int]:
+        """Run the chunks, each step's Newton under ``options``, the progress ``line``
+        updated between two; returns (status code, steps done, last residual norm,
+        Newton iterations of the last step tried)."""
         model, K = self.model, self.model.stencil_elements
         done, rnorm = model.ffi.new("long *"), model.ffi.new("double *")
         # the Newton iteration's state, carried from chunk to chunk (templates/stepper.c.j2)
@@ -284,6 +292,12 @@ class _Run:
                 self.g[0] = g[size] if self.G else 0.0
             start += size
             chunk = int(min(max(size * CHUNK_SECONDS / max(elapsed, 1e-6), 1024), 2**30))
+            if line is not None:
+                line.update(lambda: self._progress(start))
+
+    def _progress(self, done: int) -> str:
+        """The progress line's text after ``done`` of the run's new steps."""
+        return f"step {done:,} of {self.n_steps:,} ({100 * done / self.n_steps:.0f} %)"
 
     def _iterations_at(self, index: int) -> int:
         """Newton iterations of the step at ``index`` of the buffer: a failed step writes
@@ -323,7 +337,7 @@ class _Run:
         if self.G:
             out["g"] = self.model.configurations(out["g"])
         out["t"] = node_times(out["x"].shape[0], self.keep, self.h)
-        return StepResult(status=status, message=message, **out)
+        return StepResult(status=status, message=message, labels=self.model.labels, **out)
 
 
 def node_times(count: int, keep: int, h: float) -> np.ndarray:
