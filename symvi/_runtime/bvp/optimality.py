@@ -160,8 +160,8 @@ def _blocks(ab, bw, constraint_rows, gram: list | None = None):
     low = i >= j                                      # (W + Wᵀ)/2: each entry, and mirrored
     size = int(nodes.sum())
     width = int(np.abs(i - j).max(initial=0))
-    W = np.zeros((width + 1, size))
-    np.add.at(W, (np.where(low, i - j, j - i), np.where(low, j, i)), w)
+    W = np.bincount(np.where(low, i - j, j - i) * size + np.where(low, j, i), weights=w,
+                    minlength=(width + 1) * size).reshape(width + 1, size)
     rows = constraint_rows[r] & nodes[c]
     Ab = _gram(vals[rows], np.cumsum(constraint_rows)[r[rows]] - 1, position[c[rows]],
                (int(constraint_rows.sum()), size), gram)
@@ -177,16 +177,38 @@ def _gram(values: np.ndarray, rows: np.ndarray, cols: np.ndarray, shape,
     one's again where A is the same (the inertia correction's shifts and the minimum
     test's penalties change W only; the cart-pole swing-up at N = 100 spent 40 % of its
     solve forming AᵀA)."""
-    from scipy.sparse import csr_matrix
-
     key = (shape, values.tobytes(), rows.tobytes(), cols.tobytes())
     if last is not None and last[0] is not None and last[0][0] == key:
         return last[0][1]
-    A = csr_matrix((values, (rows, cols)), shape=shape)
-    band = _lower_band((A.T @ A).tocsr())
+    band = _gram_band(values, rows, cols, shape)
     if last is not None:
         last[0] = (key, band)
     return band
+
+
+def _gram_band(values: np.ndarray, rows: np.ndarray, cols: np.ndarray, shape) -> np.ndarray:
+    """AᵀA in lower band storage from A's entries, as the sum over A's rows of their
+    outer products, each row's entries padded to the longest row's count: NumPy alone,
+    where SciPy's sparse product and conversions cost the cart-pole swing-up at N = 100
+    a quarter of its solve (0.46 ms per interior-point iteration)."""
+    size = shape[1]
+    if values.size == 0:
+        return np.zeros((1, size))
+    order = np.argsort(rows, kind="stable")
+    rows, cols, values = rows[order], cols[order], values[order]
+    counts = np.bincount(rows, minlength=shape[0])
+    first = np.cumsum(counts) - counts
+    slot = np.arange(rows.size) - first[rows]          # index within its row
+    padded_cols = np.zeros((shape[0], int(counts.max())), dtype=np.intp)
+    padded = np.zeros(padded_cols.shape)
+    padded_cols[rows, slot], padded[rows, slot] = cols, values
+    i, j = padded_cols[:, :, None], padded_cols[:, None, :]
+    products = padded[:, :, None] * padded[:, None, :]
+    low = (i >= j) & (products != 0.0)
+    offsets, columns = (i - j)[low], np.broadcast_to(j, low.shape)[low]
+    width = int(offsets.max(initial=0))
+    return np.bincount(offsets * size + columns, weights=products[low],
+                       minlength=(width + 1) * size).reshape(width + 1, size)
 
 
 def _node_band(ab: np.ndarray, bw: int) -> np.ndarray:
@@ -205,17 +227,6 @@ def _sparse(ab: np.ndarray, bw: int):
 
     n = ab.shape[1]
     return dia_matrix((ab[bw:], bw - np.arange(2 * bw + 1)), shape=(n, n)).tocsr()
-
-
-def _lower_band(H) -> np.ndarray:
-    """H (sparse, symmetric) in LAPACK's lower band storage: band[i − j, j] = H[i, j]."""
-    coo = H.tocoo()
-    low = coo.row >= coo.col
-    rows, cols, vals = coo.row[low], coo.col[low], coo.data[low]
-    width = int((rows - cols).max(initial=0))
-    band = np.zeros((width + 1, H.shape[0]))
-    np.add.at(band, (rows - cols, cols), vals)
-    return band
 
 
 def _first_bad_pivot(band: np.ndarray) -> float | None:
