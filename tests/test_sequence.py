@@ -11,6 +11,8 @@ the solve from the guess on the same discrete problem, or with the exact optimum
 """
 from __future__ import annotations
 
+import importlib
+
 import numpy as np
 import pytest
 
@@ -101,3 +103,55 @@ def test_a_failed_sequence_says_so_and_counts_every_iteration(compiled):
                                      "from the guess")
     direct = solve(mod, 2000, maxiter=2, coarse=0)
     assert result.iterations > direct.iterations
+
+
+def test_ends_stretched_past_a_bound_skip_sequencing(compiled):
+    """A cart 0.4 mm inside its track (d = 0.8), moving out at 0.1 m/s: valid data at
+    N = 2000, whose coarse ends (the velocity kept over h_c = 8h) would cross the track's
+    end — the solve goes on from the guess instead of refusing the user's data (a hunt:
+    a ValueError blaming the start)."""
+    mod = compiled("cart_pole_swing_up")
+    ex = get("cart_pole_swing_up").example
+    N = 2000
+    h = ex.h * ex.n_steps / N
+    start = np.array([[0.7996, np.pi], [0.7996 + 0.1 * h, np.pi]])
+    result = mod.solve_bvp(start, np.array([[0.5, np.pi]] * 2), N, h, maxiter=2)
+    assert "mesh sequencing" not in result.message and "250 steps" not in result.message
+
+
+def test_the_coarse_solve_is_counted_in_every_record(compiled):
+    """The coarse solve's residual and step norms and history lead the sequenced
+    result's (a hunt: they held the fine solve's alone, empty for the slew's warm
+    start), and coarse below 10 steps is refused by name."""
+    mod = compiled("spacecraft_slew")
+    sequenced, coarse = solve(mod, 2000), solve(mod, 250, coarse=0)
+    count = len(coarse.residual_norms)
+    assert count and np.array_equal(sequenced.residual_norms[:count], coarse.residual_norms)
+    assert np.array_equal(sequenced.step_norms[:len(coarse.step_norms)], coarse.step_norms)
+    rows = len(coarse.history["objective"])
+    assert np.array_equal(sequenced.history["objective"][:rows], coarse.history["objective"])
+    with pytest.raises(ValueError, match=r"^coarse must be at least 10 \(or 0: no mesh "):
+        solve(mod, 2000, coarse=3)
+
+
+def test_the_active_set_newtons_linear_algebra(compiled):
+    """Two failures at N = 10⁵ (pure minimum time, sequenced): SuperLU given a matrix with
+    an empty row ended the process with a segmentation fault — now refused as singular —
+    and the horizon's dense row and column filled its factors past 24 GB — now a
+    Schur complement of K₀'s factors, which solves the bordered system exactly."""
+    from scipy.sparse import csc_matrix
+
+    mod = compiled("minimum_time_double_integrator")
+    polish = importlib.import_module(f"{mod.__name__}._runtime.bounded.polish")
+    rng = np.random.default_rng(3)
+    A = rng.standard_normal((6, 6)) + 6 * np.eye(6)
+    assert polish.sparse_lu(csc_matrix(A)) is not None
+    A[2] = 0.0                                      # structurally singular
+    assert polish.sparse_lu(csc_matrix(A)) is None
+    K0 = rng.standard_normal((7, 7)) + 7 * np.eye(7)
+    u, d, at = rng.standard_normal(7), 2.0, 4
+    full = np.insert(np.insert(K0, at, u, axis=1), at, np.insert(u, at, d), axis=0)
+    rhs = rng.standard_normal(8)
+    lu = polish.sparse_lu(csc_matrix(K0))
+    x = polish._bordered(lu.solve, u, d, at)(rhs)
+    assert np.allclose(full @ x, rhs, rtol=0, atol=1e-12)

@@ -13,6 +13,8 @@ the interior point from the guess runs (:func:`bounded_horizon`).
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 
 from .interior import InteriorPoint
@@ -69,7 +71,8 @@ def bounded(problem, path: Path, options: SolveOptions, cold: bool,
     if status in FAILED and cold:
         return _from_the_unbounded_optimum(problem, path, options, iterations, ip.failure)
     if status == Status.SUCCESS:
-        message = f"interior point from the guess: {iterations} iterations{message}"
+        start = "the guess" if cold else "the warm start"
+        message = f"interior point from {start}: {iterations} iterations{message}"
     return ip.result(end, iterations, status, message)
 
 
@@ -87,9 +90,9 @@ def bounded_horizon(problem, path: Path, options: SolveOptions, cold: bool,
     if active is not None:
         warm = _warm(problem, path, active, options)
         if warm is not None:
-            return warm
+            return replace(warm, message=f"{warm.message}; free horizon T = {warm.T:.12g}")
     ip, end, iterations, status, message = _interior(problem, path, options, near=not cold)
-    phase = "interior point from the guess"
+    phase = f"interior point from {'the guess' if cold else 'the warm start'}"
     if status in FAILED and cold and not problem.model.info.pure_minimum_time:
         # as bounded()'s: from the optimum without bounds, T free there too (perturbed
         # starts of the double integrator stalled at μ = 10, primal infeasibility 4–240;

@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from ..core.memory import AddressSpaceCap
 from ..core.paths import Path
 from .barrier import BOUND_TOLERANCE
 from ..bvp.newton import NOISE
@@ -151,6 +152,33 @@ def _undecided(ip, path: Path, active: np.ndarray, round_: int) -> np.ndarray | 
     return active | undecided if undecided.any() else None
 
 
+def sparse_lu(K):
+    """SuperLU's factorisation of the square sparse matrix K, or None where K is
+    singular: exactly (SuperLU's RuntimeError) or structurally, by an empty row or column,
+    on which SuperLU reads an uninitialised pivot and crashes (xiaoyeli/superlu#33: the
+    pure minimum-time double integrator at N = 10⁵ ended the process with a segmentation
+    fault; SciPy's structural rank, which would catch every structural singularity, took
+    minutes on the flyer's matrices, so the caller keeps other singular ones away); None
+    too where its fill outgrows the memory available (:class:`.memory.AddressSpaceCap`),
+    which would have the process killed."""
+    from scipy.sparse import csc_matrix
+    from scipy.sparse.linalg import splu
+
+    K = csc_matrix(K, copy=True)
+    K.eliminate_zeros()
+    empty_column = (np.diff(K.indptr) == 0).any()
+    empty_row = (np.bincount(K.indices, minlength=K.shape[0]) == 0).any()
+    if empty_column or empty_row:
+        return None
+    try:
+        with AddressSpaceCap():
+            return splu(K)
+    except RuntimeError:        # exactly singular
+        return None
+    except MemoryError:         # its fill past the memory available: no step from here
+        return None
+
+
 def both_sides(model, active: np.ndarray) -> bool:
     """Whether ``active`` holds both sides of a bound in some window (``ModelInfo.
     intervals``): their gradients are opposite, the KKT matrix singular — and SuperLU
@@ -209,7 +237,6 @@ def _correction(ip, path: Path, active: np.ndarray):
     or None where something is not finite; :class:`Dependent` where the matrix is
     exactly singular."""
     from scipy.sparse import bmat, csr_matrix, dia_matrix, hstack
-    from scipy.sparse.linalg import splu
 
     problem, ineq = ip.problem, ip.inequalities
     if both_sides(ip.model, active):
@@ -220,27 +247,58 @@ def _correction(ip, path: Path, active: np.ndarray):
     size = ab.shape[1]
     J = dia_matrix((ab[bw:], bw - np.arange(2 * bw + 1)), shape=(size, size))
     G = block_jacobian(ip, active)
+    rows = G.shape[0]
+    K = bmat([[J, G.T], [G, csr_matrix((rows, rows))]], format="csc")
+    # more active rows than nodes: singular (pure minimum time without T's column), which
+    # SuperLU met with a segmentation fault at N = 50
+    lu = sparse_lu(K) if rows <= size else None
+    apply = None if lu is None else lu.solve
     rates = problem.inequality_rates(path)
     if rates is not None:       # a free horizon: W's border, and ∂c/∂T of the active rows
         b, d = problem.raw
         J = bmat([[J, csr_matrix(b[:, None])], [csr_matrix(b[None, :]), csr_matrix([[d]])]])
         G = hstack([G, csr_matrix(rates[active][:, None])])
+        K = bmat([[J, G.T], [G, csr_matrix((rows, rows))]], format="csc")
+        apply = _bordered(apply, np.concatenate([b, rates[active]]), d, size)
         size += 1
-    rows = G.shape[0]
-    K = bmat([[J, G.T], [G, csr_matrix((rows, rows))]], format="csc")
-    try:
-        lu = splu(K)
-    except RuntimeError:        # exactly singular: dependent active constraints
-        raise Dependent from None
+    if apply is None and rates is not None:
+        # the horizon's row and column factorised with the rest, where the matrix without
+        # them is singular (pure minimum time: its active rows fix the nodes only with T)
+        lu = sparse_lu(K)
+        apply = None if lu is None else lu.solve
+    if apply is None:           # singular: dependent active constraints
+        raise Dependent
 
     def solve(rhs: np.ndarray) -> np.ndarray:
-        x = lu.solve(rhs)
-        return x + lu.solve(rhs - K @ x)    # one refinement: SuperLU pivots by threshold
+        x = apply(rhs)
+        return x + apply(rhs - K @ x)       # one refinement: SuperLU pivots by threshold
 
     x = solve(-np.concatenate([res, ineq.values[active]]))
     if not np.isfinite(x).all():
         return None
     return x[:size], x[size:], solve
+
+
+def _bordered(inner_solve, column: np.ndarray, corner: float, at: int):
+    """The solve of [[K₀, u], [uᵀ, d]] (u = ``column``, d = ``corner``) with the bordering
+    unknown and row at index ``at`` (T, between the nodes and the multipliers), from
+    K₀'s (``inner_solve``, None where K₀ is singular): its Schur complement
+    d − uᵀK₀⁻¹u, so that SuperLU never factorises the dense row and column (with them
+    the minimum-time slew's KKT matrix fills like N²); None where K₀ or the Schur
+    complement is singular."""
+    if inner_solve is None:
+        return None
+    w = inner_solve(column)
+    schur = corner - float(column @ w)
+    if not np.isfinite(schur) or schur == 0.0:
+        return None
+
+    def apply(rhs: np.ndarray) -> np.ndarray:
+        y = inner_solve(np.concatenate([rhs[:at], rhs[at + 1:]]))
+        last = (float(rhs[at]) - float(column @ y)) / schur
+        x = y - w * last
+        return np.concatenate([x[:at], [last], x[at:]])
+    return apply
 
 
 def block_jacobian(ip, active: np.ndarray):

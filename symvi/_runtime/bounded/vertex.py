@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .polish import block_jacobian, both_sides
+from .polish import block_jacobian, both_sides, sparse_lu
 
 #: The largest 1-norm condition number of the rows fixing the unknowns at a vertex
 #: (estimated: Hager–Higham) beyond which they count as dependent: 10⁻³/ε. The pendulum's
@@ -29,7 +29,7 @@ def fixes_every_unknown(ip, ab, bw: int, active: np.ndarray,
     free: ``rates`` its g_σ, else None) and at least as many rows as those: their
     tangent space is {0}. ``ab`` is the Newton matrix in band storage at the point."""
     from scipy.sparse import csc_matrix, dia_matrix, hstack, vstack
-    from scipy.sparse.linalg import LinearOperator, onenormest, splu
+    from scipy.sparse.linalg import LinearOperator, onenormest
 
     if both_sides(ip.model, active):
         return False
@@ -49,9 +49,8 @@ def fixes_every_unknown(ip, ab, bw: int, active: np.ndarray,
     if M.shape[0] < M.shape[1]:
         return False
     square = csc_matrix(M if M.shape[0] == M.shape[1] else M.T @ M)
-    try:
-        lu = splu(square)
-    except RuntimeError:        # exactly singular: a direction no row fixes
+    lu = sparse_lu(square)
+    if lu is None:              # singular: a direction no row fixes
         return False
     # and not singular up to rounding (a dependence that rounding hides from the pivots)
     inverse = LinearOperator(square.shape, matvec=lu.solve, rmatvec=lambda v: lu.solve(v, "T"),

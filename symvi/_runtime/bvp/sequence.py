@@ -57,12 +57,19 @@ def sequenced(solve, model, start, end, N: int, h: float, p: np.ndarray, guess, 
     if ends is None:
         return None
     plain = options.replace(coarse=0)
-    coarse = solve(*ends, Nc, h * N / Nc, guess, plain)
+    try:
+        coarse = solve(*ends, Nc, h * N / Nc, guess, plain)
+    except ValueError:
+        # the coarse ends checked against the bounds: a pair's nodes moving out at the
+        # edge of a bound are stretched past it by h_c/h (the swing-up's cart 0.4 mm
+        # inside its track at 0.1 m/s, N = 2000); the solve from the guess checks the
+        # user's own data
+        return None
+    fine_h = coarse.T / N if model.info.free_horizon else h
     if not coarse.success:
         direct = solve(start, end, N, h, guess, plain)
         return _combined(coarse, direct, f"the solve at {Nc} steps failed "
                                          f"({coarse.status.name}); from the guess")
-    fine_h = coarse.T / N if model.info.free_horizon else h
     nodes = _resampled(model, coarse, N + from_states, Nc, from_states, p)
     if nodes is None:
         return _combined(coarse, solve(start, end, N, h, guess, plain),
@@ -148,9 +155,11 @@ def _windows(coarse: BVPResult, windows: int, refinement: float, offset: float, 
 
 
 def _combined(first: BVPResult, then: BVPResult, note: str) -> BVPResult:
-    """``then`` counting ``first``'s iterations and history too, its message prefixed by
-    ``note``."""
+    """``then`` counting ``first``'s iterations, history, residual and step norms too
+    (first's first), its message prefixed by ``note``."""
     history = {key: np.concatenate([first.history[key], then.history[key]])
                for key in then.history} if first.history and then.history else then.history
     return replace(then, iterations=first.iterations + then.iterations,
-                   message=f"{note}: {then.message}", history=history)
+                   message=f"{note}: {then.message}", history=history,
+                   residual_norms=np.concatenate([first.residual_norms, then.residual_norms]),
+                   step_norms=np.concatenate([first.step_norms, then.step_norms]))

@@ -131,6 +131,41 @@ def address_space_room() -> float | None:
     return max(0.0, float(soft - current))
 
 
+class AddressSpaceCap:
+    """A ``with`` block in which this process's virtual size may grow by no more than the
+    memory available (RLIMIT_AS lowered to its current size plus
+    :func:`available_bytes`, restored on exit): an allocation past it raises MemoryError
+    instead of the operating system killing the process. For a factorisation whose fill
+    cannot be bounded beforehand (SuperLU: the pure minimum-time double integrator's
+    active-set Newton at N = 10⁵ grew past 24 GB and was killed). A no-op where the
+    limit or the sizes are unknown."""
+
+    def __enter__(self) -> "AddressSpaceCap":
+        self._restore = None
+        try:
+            import resource
+            pages = int(Path("/proc/self/statm").read_text().split()[0])
+            current = pages * os.sysconf("SC_PAGE_SIZE")
+        except (ImportError, OSError, ValueError, IndexError):
+            return self
+        room = available_bytes()
+        if room is None:
+            return self
+        soft, hard = resource.getrlimit(resource.RLIMIT_AS)
+        cap = int(current + room)
+        for limit in (soft, hard):
+            if limit != resource.RLIM_INFINITY:
+                cap = min(cap, limit)
+        resource.setrlimit(resource.RLIMIT_AS, (cap, hard))
+        self._restore = (resource, soft, hard)
+        return self
+
+    def __exit__(self, *exc) -> None:
+        if self._restore is not None:
+            resource, soft, hard = self._restore
+            resource.setrlimit(resource.RLIMIT_AS, (soft, hard))
+
+
 def require(needed: float, what: str, hint: str) -> None:
     """Raise MemoryError (naming ``what``, the estimate and ``hint``) when ``needed``
     bytes exceed the memory available."""

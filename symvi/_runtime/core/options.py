@@ -21,6 +21,11 @@ from typing import Callable, ClassVar, Mapping
 from . import arguments
 
 
+#: The fewest steps of a mesh sequence's coarse solve (``SolveOptions.coarse``): enough
+#: free nodes for every order and boundary data (2, 3, 4 failed with raw IndexErrors).
+MIN_COARSE = 10
+
+
 def option(default, doc: str, check: Callable[[object, str], object]):
     """A field of an options class: its ``default``, what it means (``doc``; the command
     line's help) and ``check(value, name)``, which returns the value normalised or raises
@@ -256,8 +261,11 @@ class SolveOptions(Options):
         "mesh sequencing: a solve of N ≥ 8·coarse steps from no guess of its own (guess "
         "None, 'cubic' or 'chord') starts from the solution at `coarse` steps, resampled "
         "on the groupoid (boundary data: States, or ends at rest, or a pair groupoid's "
-        "nodes); the result counts both solves' iterations; 0: from the guess"),
-        lambda value, what: arguments.count(value, what, 0, arguments.INT_MAX))
+        "nodes); each solve has its own maxiter, and the result counts both solves' "
+        "iterations; 0: from the guess, else at least 10"),
+        lambda value, what: value if arguments.count(value, what, 0, arguments.INT_MAX) == 0
+        else arguments.count(value, what, MIN_COARSE, arguments.INT_MAX,
+                             " (or 0: no mesh sequencing)"))
     horizon_method: str = option("newton", (
         "how a free horizon is found: 'newton' (T an unknown of the Newton system; with "
         "inequalities, where it fails, the outer iteration follows) or 'secant' (the outer "
