@@ -283,9 +283,10 @@ def _bordered(inner_solve, column: np.ndarray, corner: float, at: int):
     """The solve of [[K₀, u], [uᵀ, d]] (u = ``column``, d = ``corner``) with the bordering
     unknown and row at index ``at`` (T, between the nodes and the multipliers), from
     K₀'s (``inner_solve``, None where K₀ is singular): its Schur complement
-    d − uᵀK₀⁻¹u, so that SuperLU never factorises the dense row and column (with them
-    the minimum-time slew's KKT matrix fills like N²); None where K₀ or the Schur
-    complement is singular."""
+    d − uᵀK₀⁻¹u, so that SuperLU never factorises the dense row and column (a sparse
+    ordering's worst case; that it saves memory on the minimum-time slew is not
+    measured: the 24 GB fill at N = 10⁵ was pure minimum time's full matrix, which this
+    cannot border); None where K₀ or the Schur complement is singular."""
     if inner_solve is None:
         return None
     w = inner_solve(column)
