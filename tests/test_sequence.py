@@ -105,6 +105,22 @@ def test_a_failed_sequence_says_so_and_counts_every_iteration(compiled):
     assert result.iterations > direct.iterations
 
 
+def test_a_fine_solve_at_its_rounding_limit_is_not_repeated(compiled):
+    """xtol = 1e-13 is below rigid_body_oc's rounding at N = 2000 (its correction's
+    rounding floor ≈ 1e-13), not at the coarse 250 steps: the fine solve ends
+    ILL_CONDITIONED, a verdict on the discrete problem that the solve from the guess
+    reaches too — the result is the sequence's, with no second solve (at N = 10⁶ the
+    repeat cost 97 s against 18)."""
+    mod = compiled("rigid_body_oc")
+    result = solve(mod, 2000, xtol=1e-13)
+    assert result.status.name == "ILL_CONDITIONED"
+    assert result.message.startswith("mesh sequencing: from the solution at 250 steps")
+    assert "from the guess" not in result.message
+    direct = solve(mod, 2000, xtol=1e-13, coarse=0)
+    assert direct.status == result.status
+    assert np.abs(result.g - direct.g).max() <= 1e-10
+
+
 def test_ends_stretched_past_a_bound_skip_sequencing(compiled):
     """A cart 0.4 mm inside its track (d = 0.8), moving out at 0.1 m/s: valid data at
     N = 2000, whose coarse ends (the velocity kept over h_c = 8h) would cross the track's

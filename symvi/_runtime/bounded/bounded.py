@@ -20,19 +20,13 @@ import numpy as np
 from .interior import InteriorPoint
 from ..bvp.newton import newton
 from ..bvp.optimality import NEAR_FIRST_SHIFT
-from ..core.options import SolveOptions
+from ..core.options import NEAR_MU, SolveOptions
 from ..core.paths import Path
 from .penalty import infeasibility, nearly_feasible
 from ..core.results import BVPResult, Status
 
 #: The failures after which the interior point starts again (and then tests infeasibility).
 FAILED = (Status.STALLED, Status.MAX_ITERATIONS)
-#: The largest first barrier parameter of an interior point from the optimum without
-#: bounds or a start moved toward them: a start near a solution, which a larger μ pushes
-#: out of its basin (the cart-pole swing-up from its upper minimum itself, at μ = 10,
-#: went to the lower one); on the planar flyer's penalised start μ = 10 took 248
-#: iterations at N = 100, μ = 0.1 took 67.
-NEAR_MU = 0.1
 
 
 def bounded(problem, path: Path, options: SolveOptions, cold: bool,

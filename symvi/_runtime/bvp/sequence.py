@@ -9,14 +9,17 @@ STALLED there. The discrete solutions converge as N grows (order 2 in h from Sta
 from nodes at the ends), so the solution at N_c = ``coarse`` steps, resampled on the
 groupoid (``symvi_path_resample``: a cubic Hermite curve in the chart at each coarse
 node), is within O(h_c) of the solution at N, and the fine solve starts near it — with
-bounds at the barrier parameter :data:`FINE_MU` (the swing-up at N = 10⁴: 40 iterations
-at N_c = 250, then 9, in 0.8 s). A free horizon starts from the coarse optimum's.
+bounds at the barrier parameter :data:`.options.NEAR_MU` (the swing-up at N = 10⁴: 40
+iterations at N_c = 250, then 9, in 0.8 s). A free horizon starts from the coarse optimum's.
 
 The coarse problem has the fine one's boundary data where they mean the same at any step:
 States, ends at rest (every fixed node of an end the same), or a pair groupoid's nodes,
 whose velocities (q₁ − q₀)/h are kept by scaling the differences from the outer node by
 h_c/h. Elsewhere (moving ends on a group, given as nodes) the solve starts from the guess.
-Where the coarse or the fine solve fails, the solve from the guess follows; every result
+Where the coarse solve fails, or the fine one fails for its start (stalled, out of
+iterations, diverged, …), the solve from the guess follows — not where the fine solve
+reached its rounding limit (ILL_CONDITIONED), which the solve from the guess meets as well
+(rigid_body_oc at N = 10⁶: 97 s for the same verdict, 18 s without it); every result
 counts the iterations of all the solves it ran, its message says which, and its history
 holds their rows in the order they ran.
 """
@@ -26,13 +29,10 @@ from dataclasses import replace
 
 import numpy as np
 
+from ..core.options import NEAR_MU
 from ..core.paths import Resampled, flat_configurations
-from ..core.results import BVPResult, State
+from ..core.results import BVPResult, State, Status
 
-#: The first barrier parameter of a fine solve from a resampled coarse solution (bounded
-#: problems): a start near a solution, which μ = 10 pushes away (the swing-up at N = 10⁴:
-#: 25 iterations at μ = 10, 9 at μ = 0.1 — the interior point's start near a solution).
-FINE_MU = 0.1
 #: Sequencing applies from N = SPAN × coarse steps (2000 by default, where the lifted
 #: system takes over): below, a Newton iteration at N costs little more than one at N_c
 #: and the coarse solve about what it saves (the slew at N = 1000: 31 + 8 iterations,
@@ -75,11 +75,11 @@ def sequenced(solve, model, start, end, N: int, h: float, p: np.ndarray, guess, 
         return _combined(coarse, solve(start, end, N, h, guess, plain),
                          f"the solution at {Nc} steps leaves the retraction's chart "
                          f"between two nodes; from the guess")
-    fine_options = plain.replace(mu_start=min(plain.mu_start, FINE_MU))
+    fine_options = plain.replace(mu_start=min(plain.mu_start, NEAR_MU))
     fine = solve(start, end, N, fine_h, nodes, fine_options)
     note = (f"mesh sequencing: from the solution at {Nc} steps ({coarse.iterations} "
             f"iterations), resampled")
-    if fine.success:
+    if fine.success or fine.status == Status.ILL_CONDITIONED:
         return _combined(coarse, fine, note)
     direct = solve(start, end, N, h, guess, plain)
     return _combined(_combined(coarse, fine, note), direct,
