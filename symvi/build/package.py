@@ -99,6 +99,7 @@ def info(dm: DerivedModel, key: str, description: str) -> ModelInfo:
                                **{k: _nested(v) for k, v in G.invariants.items()})
                      for G in dm.c_context.groups),
         fibre_nodes=tuple(fibre_nodes(dm)),
+        configuration_base=tuple(dm.configuration_base),
         kernels=tuple(KernelInfo(name=k.name, nz=len(k.z),
                                  outputs=tuple(len(M) for _, M in k.outputs))
                       for k in dm.kernels),

@@ -245,6 +245,14 @@ def end_conditions(end: Any, groupoid: Groupoid, defaults: Mapping[sp.Symbol, fl
     return tuple(out)
 
 
+#: Where an inequality names symbols of its own on a groupoid with a matrix group: the
+#: configuration is reached through the group acting on itself (issue 50, item 4).
+_CONFIGURATION_HINT = ("; an inequality on a matrix group's configuration g (a world-frame "
+                       "position, a pointing direction) is written on "
+                       "ActionGroupoid.on_itself(group), in the entries of its "
+                       ".configuration")
+
+
 def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
                     controls: Sequence[Any] | str, actuated: Sequence[int] | None = None,
                     parameters: Mapping[Any, float] | None = None,
@@ -331,7 +339,8 @@ def optimal_control(name: str, groupoid: Groupoid, lagrangian: Any, cost: Any,
                          f"{name!r}; it is C(q, y, u) with controls {list(map(str, u))}")
     defaults = dict(_sympify_parameters(parameters))
     rho = _time_cost(time_cost, defaults)
-    bounds_u, path = declared(bounds, inequalities, u, groupoid.continuous_symbols(1), defaults)
+    bounds_u, path = declared(bounds, inequalities, u, groupoid.continuous_symbols(1), defaults,
+                              _CONFIGURATION_HINT if groupoid.matrix_groups() else "")
     if not C.free_symbols & set(u):
         _pure_minimum_time(name, u, rho, bounds_u, path, defaults)
     final = end_conditions(end, groupoid, defaults, u)

@@ -65,10 +65,12 @@ def _named(inequalities) -> list[tuple[str, Any]]:
 
 
 def declared(bounds: Mapping | None, inequalities, controls: Sequence[sp.Symbol],
-             coordinates: Sequence[sp.Symbol], defaults: Mapping[sp.Symbol, float]):
+             coordinates: Sequence[sp.Symbol], defaults: Mapping[sp.Symbol, float],
+             hint: str = ""):
     """(per control its :data:`Interval`, path inequalities as (name, g) with g ≤ 0 in the
     coordinates, controls and parameters), from what :func:`symvi.optimal_control` got;
-    ``defaults`` maps each parameter symbol to its default value."""
+    ``defaults`` maps each parameter symbol to its default value; ``hint`` ends the
+    message of an inequality in unknown symbols."""
     by_name = {str(s): s for s in list(controls) + list(coordinates)}
     control_bounds = {u: (None, None) for u in controls}
     path: list[tuple[str, sp.Expr]] = []
@@ -95,7 +97,8 @@ def declared(bounds: Mapping | None, inequalities, controls: Sequence[sp.Symbol]
         if unknown:
             raise ModelError(f"inequality {name!r} uses {sorted(map(str, unknown))}; it is "
                              f"g(q, y, u) ≤ 0 in the coordinates {[str(c) for c in coordinates]}"
-                             f", the controls {[str(u) for u in controls]} and parameters")
+                             f", the controls {[str(u) for u in controls]} and parameters"
+                             f"{hint}")
         if not g.free_symbols & (set(controls) | set(coordinates)):
             raise ModelError(f"inequality {name!r} ({g} <= 0) depends on no coordinate or control")
         path.append((f"{name}: {g} <= 0", g))

@@ -119,6 +119,8 @@ class DerivedModel:
     #: coordinate, the base coordinate it is measured from (a pair factor's q_{k+1}) or
     #: −1 (a group increment); empty when the model has no lifted solve.
     fibre_sources: tuple[int, ...] = ()
+    #: :meth:`Groupoid.configuration_base`.
+    configuration_base: tuple[int, ...] = ()
 
     @property
     def stencil_elements(self) -> int:
@@ -777,4 +779,5 @@ def _derive(dm: DiscreteModel) -> DerivedModel:
                         if any(k.name == KernelName.NOETHER.value for k in kernels) else (),
                         gauges=tuple(name for name, _ in dm.gauges), c_context=g.c_context(),
                         fibre_sources=fibre_sources(dm),
+                        configuration_base=tuple(g.configuration_base()),
                         coefficients=tuple(sorted(coefficients, key=lambda c: c.__name__)))

@@ -423,6 +423,12 @@ class Groupoid(ABC):
         into the ``manifold`` kernel, with which the run time checks the user's data."""
         return ()
 
+    def configuration_base(self) -> tuple[int, ...]:
+        """Per base coordinate, the row-major index into the node's flat configuration g
+        (the matrix groups' entries in order) of the entry it equals, or −1: the run time
+        fills and checks such base points from g (:meth:`ActionGroupoid.on_itself`)."""
+        return (-1,) * self.source_dim
+
     def matrix_groups(self) -> tuple:
         """The matrix Lie groups of this groupoid (a Lie group, an action groupoid's
         acting group, a product's): their Lie algebra bases must close."""

@@ -128,6 +128,13 @@ class ProductGroupoid(Groupoid):
     def matrix_groups(self):
         return tuple(G for f in self.factors for G in f.matrix_groups())
 
+    def configuration_base(self) -> tuple[int, ...]:
+        out, offset = [], 0
+        for factor in self.factors:
+            out += [i if i < 0 else i + offset for i in factor.configuration_base()]
+            offset += sum(G.matrix_dim ** 2 for G in factor.matrix_groups())
+        return tuple(out)
+
     def fibre_sampling(self):
         out, offset = [], 0
         for factor in self.factors:

@@ -8,9 +8,10 @@ minimising ½∫(τ² + f₁² + f₂²) dt for the torque τ and the body-frame
 thrusters and the torque are limited to |f₂| ≤ side, |τ| ≤ τ_max. A disc of radius r
 about (2, 0.2) is out of bounds: the straight flight passes through it.
 
-The keep-out disc is a path inequality on a base point. The configuration of a Lie group
-enters no kernel, so the model is the action groupoid R²×SE(2) whose base point is the
-disc's centre seen from the body, c = g⁻¹·centre: it moves with the increments as
+The keep-out disc is a path inequality on a base point: the model is the action groupoid
+R²×SE(2) whose base point is the disc's centre seen from the body, c = g⁻¹·centre (the
+same disc on the world position of ``ActionGroupoid.on_itself(SE2())`` gives the same
+optimum, ``tests/test_configuration.py``): it moves with the increments as
 c_{k+1} = w_k⁻¹·c_k (a right action), and the disc is r² − |c|² ≤ 0 at every window's
 middle node. Without the bounds the body brakes with its main thruster (f₁ < 0 on 107 of
 199 windows); the interior point started there stalls, and succeeds from that optimum

@@ -21,7 +21,7 @@ from typing import Any, Iterator, Mapping
 
 #: The schema version of :class:`ModelInfo`: raised whenever a field is added, removed,
 #: renamed or changes meaning, so that a package written with another schema is refused.
-VERSION = 4
+VERSION = 5
 
 
 class ModelInfoError(ValueError):
@@ -209,6 +209,9 @@ class ModelInfo:
     groups: tuple[GroupInfo, ...]
     #: Per fibre coordinate: the base coordinate of the target node it copies, or −1.
     fibre_nodes: tuple[int, ...]
+    #: Per base coordinate: the row-major index into the flat configuration g of the
+    #: entry it equals (a group acting on itself), or −1.
+    configuration_base: tuple[int, ...]
     #: The compiled kernels.
     kernels: tuple[KernelInfo, ...]
     #: The symvi version that built the package.

@@ -74,7 +74,38 @@ def nodes(model, value, count: int, what: str, first: int = 0) -> tuple[np.ndarr
     x, g = _parse_nodes(model, value, count, what)
     check_configurations(model, g, f"{what} configurations", first)
     check_base_points(model, x, f"{what} base points", first)
+    _check_configured(model, x, g, what, first)
     return x, g
+
+
+def _configured(model, value) -> bool:
+    """Whether ``value`` holds configurations alone where every base coordinate is an
+    entry of the configuration (a group acting on itself): not an (x, g) pair, whose x
+    is a 2-D array of base points."""
+    base = model.info.configuration_base
+    if not base or min(base) < 0 or isinstance(value, Resampled):
+        return False
+    pair = isinstance(value, (tuple, list)) and len(value) == 2 \
+        and np.ndim(value[0]) == 2 and np.ndim(value[1]) >= 3
+    return not pair
+
+
+def _check_configured(model, x: np.ndarray, g: np.ndarray, what: str, first: int) -> None:
+    """Base points that are configuration entries must equal them (a group acting on
+    itself, ``ActionGroupoid.on_itself``): otherwise the path inequalities on them would
+    hold for another configuration than the path's."""
+    base = np.asarray(model.info.configuration_base, dtype=int)
+    held = np.flatnonzero(base >= 0)
+    if not held.size or not x.shape[0]:
+        return
+    gap = np.abs(x[:, held] - g[:, base[held]]) / (1.0 + np.abs(g[:, base[held]]))
+    k, i = np.unravel_index(np.argmax(gap), gap.shape)
+    if gap[k, i] > 1e-9:
+        raise ValueError(
+            f"{what} base point {model.info.coordinate_names[held[i]]} of node {first + k} is "
+            f"{x[k, held[i]]:.12g}, but the configuration's entry it stands for is "
+            f"{g[k, base[held[i]]]:.12g}: give the configurations alone (their base points "
+            f"are filled from them) or base points equal to their entries")
 
 
 def _parse_nodes(model, value, count: int, what: str) -> tuple[np.ndarray, np.ndarray]:
@@ -85,9 +116,9 @@ def _parse_nodes(model, value, count: int, what: str) -> tuple[np.ndarray, np.nd
                                        f"{what} configurations"))
     if not dims:
         return arguments.finite_array(value, (count, m), f"{what} nodes"), np.zeros((count, 0))
-    if m == 0:
-        return np.zeros((count, 0)), flat_configurations(model, value, count,
-                                                         f"{what} configurations")
+    if m == 0 or _configured(model, value):
+        g = flat_configurations(model, value, count, f"{what} configurations")
+        return g[:, list(model.info.configuration_base)], g
     try:
         x, g = value
     except (TypeError, ValueError):
