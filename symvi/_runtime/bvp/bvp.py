@@ -15,12 +15,12 @@ and its inertia), :mod:`.globalisation` (descent, natural and backtracking steps
 from __future__ import annotations
 
 from dataclasses import replace
-from typing import Mapping
+from typing import Callable, Mapping
 
 import numpy as np
 
 from ..core import arguments
-from . import boundary_states, sequence
+from . import boundary_states, guesses, sequence
 from .assembly import Problem
 from .bordered import HorizonProblem
 from .band import cholesky_pivot
@@ -57,7 +57,7 @@ def solve_steps(model, n_steps: int, from_states: bool) -> int:
 
 def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
               params: Mapping[str, float] | None = None, *, T: float | None = None,
-              guess: str | np.ndarray | tuple | BVPResult | None = None,
+              guess: str | np.ndarray | tuple | BVPResult | Callable | None = None,
               maxiter: int = SolveOptions.unset("maxiter"),
               xtol: float = SolveOptions.unset("xtol"),
               ftol: float = SolveOptions.unset("ftol"), options: SolveOptions | None = None,
@@ -106,6 +106,10 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
         continuation): its free nodes, its multipliers, and its fibres where both nodes
         are unchanged; with bounds also its bound multipliers and active set, from which
         the active-set Newton is tried before the interior point (:mod:`.polish`).
+        A previous result at another number of steps is resampled on the groupoid to
+        this one's, with its multipliers and active set (:mod:`.guesses`); a function
+        ``guess(t)`` returning a :class:`State` gives the free nodes' positions (x, g) at
+        their times — on every groupoid, without building its node layout.
     options, keywords : a :class:`.options.SolveOptions` (or a mapping of its fields),
         or its fields as keywords (``maxiter=``, ``xtol=``, ``ftol=``, ``verbose=``, …;
         an options object and a keyword for one field are refused together): it goes whole to every phase of the solve. A name that is not an
@@ -173,11 +177,8 @@ def _solve(model, start, end, N: int, h: float, p, guess, options: SolveOptions,
     """:func:`solve_bvp` once its arguments are checked: from States, with a free
     horizon, or at the step h."""
     info = model.info
+    guess = guesses.converted(model, guess, N + from_states, h, p, from_states)
     if from_states:
-        if isinstance(guess, BVPResult) and guess.t_states is not None \
-                and len(guess.t_states) - 1 != N:
-            raise ValueError(f"guess: a previous result warm-starts a solve with its own "
-                             f"number of steps ({len(guess.t_states) - 1}), not n_steps = {N}")
         nodes = (boundary_states.element_nodes(model, start, h, "start"),
                  boundary_states.element_nodes(model, end, h, "end"))
         result = fixed_horizon(model, *nodes, N + 1, h, p, guess, options, (start, end))

@@ -70,7 +70,7 @@ def sequenced(solve, model, start, end, N: int, h: float, p: np.ndarray, guess, 
         direct = solve(start, end, N, h, guess, plain)
         return _combined(coarse, direct, f"the solve at {Nc} steps failed "
                                          f"({coarse.status.name}); from the guess")
-    nodes = _resampled(model, coarse, N + from_states, Nc, from_states, p)
+    nodes = resampled(model, coarse, N + from_states, Nc, from_states, p)
     if nodes is None:
         return _combined(coarse, solve(start, end, N, h, guess, plain),
                          f"the solution at {Nc} steps leaves the retraction's chart "
@@ -109,8 +109,8 @@ def _scaled(model, value, ratio: float, outer: int):
     return nodes[outer] + (nodes - nodes[outer]) / ratio
 
 
-def _resampled(model, coarse: BVPResult, steps: int, Nc: int, from_states: bool,
-               p: np.ndarray) -> Resampled | None:
+def resampled(model, coarse: BVPResult, steps: int, Nc: int, from_states: bool,
+              p: np.ndarray) -> Resampled | None:
     """The free nodes of the fine path (``steps`` elements) on the coarse solution: fine
     node j at time (j − o)h lies at coarse position (j − o)·h/h_c + o, o = ½ from States
     (nodes at the half steps), else 0; None where the resampling leaves the chart."""
