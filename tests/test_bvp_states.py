@@ -127,8 +127,9 @@ def test_cubic_spline_between_states_with_velocities(compiled):
     for errors in (costs, paths):
         assert np.all(np.abs(orders(errors) - 2) < 0.1), (errors, orders(errors))
     h = T / STEPS[-1]
-    start = boundary_states.element_nodes(mod.model, State(x=q0, v=v0), h, "start")
-    end = boundary_states.element_nodes(mod.model, State(x=q1, v=v1), h, "end")
+    p = mod.model.params(None)
+    start = boundary_states.element_nodes(mod.model, State(x=q0, v=v0), h, p, "start")
+    end = boundary_states.element_nodes(mod.model, State(x=q1, v=v1), h, p, "end")
     nodes = mod.solve_bvp(start, end, STEPS[-1] + 1, h)
     np.testing.assert_array_equal(nodes.x, r.x)
     assert nodes.cost == r.cost
@@ -196,8 +197,8 @@ def test_underactuated_and_bounded_problems_take_states(compiled):
      "end state's velocity is outside the retraction's chart"),
     ("cart_pole_catch", State(x=[0, 0.3], v=[0, 0]), State(x=[0, 0], v=[0, 0]),
      "end is free or given by end conditions"),
-    ("planar_flyer", State(x=[0, 0], v=[0, 0, 0]), State(x=[0, 0], v=[0, 0, 0]),
-     "pair groupoid or matrix Lie groups"),
+    ("planar_flyer", State(x=[2, 0.2], v=[0, 0, 0]), State(x=[-2, 0.2], v=[0, 0, 0]),
+     r"inconsistent boundary data or guess: the base point of node 20 differs by 4\.000e\+00"),
     ("pendulum", State(x=[0], v=[0]), State(x=[1], v=[0]), "order-1 problem fixes its end"),
 ])
 def test_bad_state_boundary_data_are_named(compiled, name, start, end, match):
@@ -251,5 +252,47 @@ def test_failed_and_mismatched_results_from_states(compiled):
     assert warm.success and np.abs(warm.g - cold.g).max() <= 1e-12
     nodes = replaced(r, t=r.t + 0.5 * r.t_states[1], g=np.full_like(r.g, np.nan),
                      states=None, t_states=None)
-    again = boundary_states.attach(mod.model, nodes, r.t_states[1])
+    again = boundary_states.attach(mod.model, nodes, r.t_states[1], mod.model.params(None))
     assert again.states is None and again.T == 1.0
+
+
+def test_states_on_an_action_groupoid_times_a_pair_groupoid(compiled):
+    """The heavy top with rotors (SO(3) acting on the direction of gravity Γ, times the
+    rotor angles' pair groupoid) from States at rest: each end's element has the State at
+    its midpoint — Γ moved by the action, θ by ∓hθ̇/2, the attitude by τ(∓hξ/2) — and the
+    optimal cost converges at order 2 (against N = 1280; from nodes it is order 1)."""
+    from symvi.models.heavy_top_rotors_oc import _rotation_x
+    mod = compiled("heavy_top_rotors_oc")
+    e3, R = np.array([0.0, 0.0, 1.0]), _rotation_x(0.2)
+    ends = (State(x=np.r_[e3, 0.0, 0.0], g=np.eye(3), v=np.zeros(5)),
+            State(x=np.r_[R.T @ e3, -1.0, 0.0], g=R, v=np.zeros(5)))
+    costs = []
+    for N in (40, 80, 160, 1280):
+        r = mod.solve_bvp(*ends, N, T=2.0)
+        assert r.success, r.message
+        costs.append(r.cost)
+    errors = np.abs(np.array(costs[:-1]) - costs[-1])
+    assert np.all(np.abs(np.log2(errors[:-1] / errors[1:]) - 2) < 0.1), errors
+    assert np.abs(r.states.x[[0, -1]] - [ends[0].x, ends[1].x]).max() <= 1e-13
+    assert np.abs(r.states.g[-1] - R).max() <= 1e-13 and np.abs(r.states.v[-1]).max() <= 1e-13
+
+
+def test_a_bad_example_is_refused_when_declared():
+    """The Example's boundary data are checked by the declaration itself, before any
+    build: a State whose velocity has the wrong size, a configuration off SO(3)."""
+    import sympy as sp
+    from symvi import SO3, Example, ModelError, optimal_control
+    G = SO3()
+    u = sp.symbols("tau1 tau2 tau3", real=True)
+
+    def declare(start):
+        return optimal_control(name="refused", groupoid=G,
+                               lagrangian=sum(w**2 for w in G.xi) / 2,
+                               cost=sum(x**2 for x in u) / 2, controls=u,
+                               example=Example(h=0.1, n_steps=10, start=start,
+                                               end=State(g=np.eye(3), v=np.zeros(3))))
+    with pytest.raises(ModelError, match=r"example of model 'refused': the start state's "
+                                         r"velocity v has shape \(2,\), expected \(3,\)"):
+        declare(State(g=np.eye(3), v=np.zeros(2)))
+    with pytest.raises(ModelError, match=r"the start state's configuration g is not on SO3"):
+        declare(State(g=2 * np.eye(3), v=np.zeros(3)))

@@ -371,12 +371,18 @@ class Model:
             self._check_symbols(z.potential, element, f"symmetry {z.name!r}, potential")
 
     def _validate_example(self) -> None:
-        if self.example is None or self.example.initial is None:
+        """The example's data checked now, before any build (issue 53: a quadrotor's
+        States were refused at run time, after a 101 s build)."""
+        if self.example is None:
             return
         try:
-            self.groupoid.check_initial(self.example.initial, self.order)
+            if self.example.initial is not None:
+                self.groupoid.check_initial(self.example.initial, self.order)
+            for what, value in (("start", self.example.start), ("end", self.example.end)):
+                if value is not None:
+                    self.groupoid.check_boundary(value, self.order, what)
         except ModelError as exc:
-            raise ModelError(f"example initial data of model {self.name!r}: {exc}") from None
+            raise ModelError(f"example of model {self.name!r}: {exc}") from None
 
     # -- identity ---------------------------------------------------------------------
     def fingerprint(self) -> str:

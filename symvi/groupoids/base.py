@@ -423,6 +423,41 @@ class Groupoid(ABC):
         into the ``manifold`` kernel, with which the run time checks the user's data."""
         return ()
 
+    def check_boundary(self, value, order: int, what: str) -> None:
+        """Raise ModelError unless ``value`` can be boundary data of a whole-trajectory
+        solve of ``order``: a State (an object with ``v``, ``x``, ``g``; second order
+        only) with a velocity per fibre coordinate, a position per base coordinate
+        (those a group acting on itself holds in g may be left out) and configurations
+        on their groups; or ``order`` nodes — base points (r, m), configurations
+        (r, d, d) per group factor, or both as (x, g) — their configurations on their
+        groups. Checked when a model is declared, before any build; the run time checks
+        the same data again, with its parameters."""
+        m, groups = self.source_dim, self.matrix_groups()
+        if all(hasattr(value, a) for a in ("v", "x", "g")):
+            if order != 2:
+                raise ModelError(f"{what}: States are boundary data of second-order problems; "
+                                 f"an order-{order} problem fixes its end nodes (positions)")
+            _shape(value.v, (self.fibre_dim,), f"the {what} state's velocity v")
+            held = m and all(i >= 0 for i in self.configuration_base())
+            if m and not (held and value.x is None):
+                _shape(value.x, (m,), f"the {what} state's position x")
+            blocks = [] if value.g is None else [value.g] if len(groups) == 1 else list(value.g)
+            for G, g in zip(groups, blocks):
+                G.check_configuration(np.asarray(g, dtype=float), f"the {what} state's "
+                                      f"configuration g")
+            return
+        pair = isinstance(value, (tuple, list)) and len(value) == 2 \
+            and np.ndim(value[0]) == 2 and np.ndim(value[1]) >= 3
+        held = m and all(i >= 0 for i in self.configuration_base())
+        x, g = value if pair else (None, value) if held or not m else (value, None)
+        if m and x is not None:
+            _shape(x, (order, m), f"the {what} base points")
+        blocks = [] if g is None else [g] if len(groups) == 1 else list(g)
+        for G, nodes in zip(groups, blocks):
+            _shape(nodes, (order, G.matrix_dim, G.matrix_dim), f"the {what} configurations")
+            for k, node in enumerate(np.asarray(nodes, dtype=float)):
+                G.check_configuration(node, f"the {what} configuration {k}")
+
     def configuration_base(self) -> tuple[int, ...]:
         """Per base coordinate, the row-major index into the node's flat configuration g
         (the matrix groups' entries in order) of the entry it equals, or −1: the run time

@@ -129,6 +129,27 @@ class MatrixLieGroup(Groupoid):
                 "fixed": kernel(self.basis),
                 "cofixed": kernel([E.T for E in self.basis])}
 
+    def check_configuration(self, g: np.ndarray, what: str, tol: float = 1e-9) -> None:
+        """Raise ModelError unless ``g`` is a finite d×d matrix on the group, as far as
+        :meth:`invariants` cut it out (gᵀJg = J, gKgᵀ = K, gv = v, wᵀg = wᵀ, det g > 0)
+        to ``tol`` relative to g's size."""
+        d = self.matrix_dim
+        _shape(g, (d, d), what)
+        if not np.isfinite(g).all():
+            raise ModelError(f"{what} is not finite")
+        scale = 1.0 + float(np.abs(g).max())
+        invariants = self.invariants()
+        defects = [np.abs(g.T @ np.array(J) @ g - np.array(J)).max()
+                   for J in invariants["quadratic"]] \
+            + [np.abs(g @ np.array(K) @ g.T - np.array(K)).max()
+               for K in invariants["coquadratic"]] \
+            + [np.abs(g @ np.array(v) - np.array(v)).max() for v in invariants["fixed"]] \
+            + [np.abs(np.array(w) @ g - np.array(w)).max() for w in invariants["cofixed"]]
+        worst = max(defects, default=0.0)
+        if worst > tol * scale ** 2 or np.linalg.det(g) <= 0:
+            raise ModelError(f"{what} is not on {self.label} (its defect is {worst:.1e}, "
+                             f"det {np.linalg.det(g):.3g})")
+
     def _closure(self):
         n, constants = len(self.basis), {}
         for a in range(n):

@@ -179,15 +179,15 @@ class HorizonProblem(Problem):
         for state, which, nodes in ((self.states[0], "start", slice(0, 2)),
                                     (self.states[1], "end", slice(-2, None))):
             try:
-                value = boundary_states.element_nodes(self.model, state, h_ends, which)
+                value = boundary_states.element_nodes(self.model, state, h_ends, self.p, which)
             except ValueError:
                 return None
-            # States fix the nodes of a pair groupoid or the configurations of Lie groups
-            # (boundary_states.check_supported), never both
-            if self.model.m:
-                moved.x[nodes] = value
-            else:
-                moved.g[nodes] = flat_configurations(self.model, value, 2, "end nodes")
+            m, groups = self.model.m, bool(self.model.matrix_dims)
+            x, g = (value if m and groups else (value, None) if m else (None, value))
+            if m:
+                moved.x[nodes] = x
+            if groups:
+                moved.g[nodes] = flat_configurations(self.model, g, 2, "end nodes")
         for nodes, elements in ((slice(0, 3), slice(0, 2)), (slice(-3, None), slice(-2, None))):
             f = fibres(self.model, np.ascontiguousarray(moved.x[nodes]),
                        np.ascontiguousarray(moved.g[nodes]), self.p, h, lambda k: "an end element")

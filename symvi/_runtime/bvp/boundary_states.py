@@ -26,23 +26,8 @@ import numpy as np
 from ..core import arguments
 from ..core.geometry import check_base_points, check_configurations
 from ..core.model_info import Kernel
-from ..core.paths import node_velocities
+from ..core.paths import check_configured, node_velocities
 from ..core.results import BVPResult, State
-
-
-def _moves_nodes(model) -> bool:
-    """Whether every fibre coordinate is a copy of a base coordinate at the target node and
-    every base coordinate is copied (``INFO.fibre_nodes``; a pair groupoid): then a
-    state's velocity moves the base point, x ∓ h v/2."""
-    nodes = np.asarray(model.info.fibre_nodes, dtype=int)
-    return bool((nodes >= 0).all()) and sorted(nodes.tolist()) == list(range(model.m))
-
-
-def _base_rate(model, v: np.ndarray) -> np.ndarray:
-    """ẋ of a state of velocity v: v_a moves the base coordinate its fibre copies."""
-    rate = np.zeros(model.m)
-    rate[np.asarray(model.info.fibre_nodes, dtype=int)] = v
-    return rate
 
 
 def given(start, end) -> bool:
@@ -60,37 +45,48 @@ def check_supported(model) -> None:
     if model.order != 2:
         raise ValueError(f"model {name!r}: States are boundary data of second-order problems; "
                          f"an order-{model.order} problem fixes its end nodes only (positions)")
-    if not (_moves_nodes(model) or model.m == 0):
-        raise ValueError(f"model {name!r}: States as boundary data need a pair groupoid or "
-                         f"matrix Lie groups (this is a {model.info.kind} groupoid); give "
-                         f"the first and last two nodes")
-    if model.m and model.info.has_kernel(Kernel.MANIFOLD):
-        raise ValueError(f"model {name!r}: its positions lie on a declared manifold, which "
-                         f"q ∓ hv/2 leaves; give the first and last two nodes")
     if model.end_free or model.end_count:
         raise ValueError(f"model {name!r}: its end is free or given by end conditions; give "
                          f"the start as nodes (a State fixes both ends)")
 
 
-def element_nodes(model, state: State, h: float, what: str):
+def element_nodes(model, state: State, h: float, p: np.ndarray, what: str):
     """The two nodes of the element whose midpoint is ``state``, in the layout of
-    :func:`.bvp.solve_bvp`'s ``start``/``end``: (2, n) nodes on a pair groupoid, (2, d, d)
-    configurations (a tuple of them with several group factors) on Lie groups."""
+    :func:`.bvp.solve_bvp`'s ``start``/``end``: the state's node moved by the node
+    variations τ(∓hv/2) — x ∓ hv/2 on a pair factor, g τ(∓hξ/2) on a group factor, the
+    base point of an action groupoid by the action (which keeps it on its manifold)."""
     v = arguments.finite_array(state.v, (model.n,), f"the {what} state's velocity v")
-    if model.m:
-        x = arguments.finite_array(state.x, (model.m,), f"the {what} state's position x")
-        check_base_points(model, x[None], f"the {what} state's position x")
-        rate = _base_rate(model, v)
-        return np.stack([x - 0.5 * h * rate, x + 0.5 * h * rate])
-    g = model.configuration(state.g, f"the {what} state's configuration g")
-    check_configurations(model, g[None], f"the {what} state's configuration g")
-    first = _retract(model, g[None], v[None], -0.5 * h)
-    second = None if first is None else _retract(model, first, v[None], h)
+    x, g = _node(model, state, what)
+    # the element's increment τ(hξ) within the chart (exp: an angle below π), which the
+    # node variations themselves do not need
+    inside = not model.matrix_dims or _retract(model, g[None], v[None], h) is not None
+    first = _moved(model, x[None], g[None], v[None], -0.5 * h, p) if inside else None
+    second = None if first is None else _moved(model, *first, v[None], h, p)
     if second is None:
         raise ValueError(f"the {what} state's velocity is outside the retraction's chart at "
                          f"h = {h:g} (Cayley: a half-turn; exp: an angle ≥ π per step); "
                          f"take more steps")
-    return model.configurations(np.concatenate([first, second]))
+    x, g = (np.concatenate(pair) for pair in zip(first, second))
+    if not model.matrix_dims:
+        return x
+    return model.configurations(g) if model.m == 0 else (x, model.configurations(g))
+
+
+def _node(model, state: State, what: str) -> tuple[np.ndarray, np.ndarray]:
+    """The state's position as one node (x, flat g), checked on its manifold and group;
+    a group acting on itself takes its base point from the configuration."""
+    g = model.configuration(state.g, f"the {what} state's configuration g")
+    if model.matrix_dims:
+        check_configurations(model, g[None], f"the {what} state's configuration g")
+    base = np.asarray(model.info.configuration_base, dtype=int)
+    if model.m and state.x is None and base.size and (base >= 0).all():
+        x = g[base]
+    else:
+        x = arguments.finite_array(state.x, (model.m,), f"the {what} state's position x") \
+            if model.m else np.zeros(0)
+    check_base_points(model, x[None], f"the {what} state's position x")
+    check_configured(model, x[None], g[None], f"the {what} state's", 0)
+    return x, g
 
 
 def _retract(model, g: np.ndarray, f: np.ndarray, h: float) -> np.ndarray | None:
@@ -102,24 +98,37 @@ def _retract(model, g: np.ndarray, f: np.ndarray, h: float) -> np.ndarray | None
     return out
 
 
-def attach(model, result: BVPResult, h: float) -> BVPResult:
+def _moved(model, x: np.ndarray, g: np.ndarray, eta: np.ndarray, scale: float,
+           p: np.ndarray):
+    """Copies of the nodes (x, g) moved by τ(scale·η) each, or None off the chart."""
+    x, g = np.array(x, dtype=float), np.array(g, dtype=float)
+    eta = np.ascontiguousarray(eta, dtype=float)
+    if model.lib.symvi_path_move(model.ptr(x), model.ptr(g), model.ptr(eta), len(eta),
+                                 scale, model.ptr(p)):
+        return None
+    return x, g
+
+
+def attach(model, result: BVPResult, h: float, p: np.ndarray) -> BVPResult:
     """``result`` of the node problem as the States solve's: node times at the half steps,
     ``t_states`` = k·h (so that ``T`` is N·h, failed or not) and, where the path is
-    finite, the states at those times (the elements' midpoints) as ``states``."""
+    finite, the states at those times — the elements' midpoints, node k moved by
+    τ(h v_k/2) — as ``states``."""
     if not len(result.t):
         return result
     base = replace(result, t=result.t - 0.5 * h, t_states=h * np.arange(len(result.t) - 1))
     if result.f is None:
         return base
     f = np.asarray(result.f, dtype=float)
-    if model.m:
-        x = np.asarray(result.x, dtype=float)
-        return replace(base, states=State(v=node_velocities(model, x, f, h),
-                                          x=0.5 * (x[1:] + x[:-1])))
+    count = len(f)
+    x = np.asarray(result.x, dtype=float)[:count] if model.m else np.zeros((count, 0))
     blocks = result.g if isinstance(result.g, tuple) else (result.g,)
-    g = np.concatenate([np.asarray(b, dtype=float).reshape(len(b), -1) for b in blocks], axis=1)
-    finite = np.isfinite(g).all() and np.isfinite(f).all()
-    middle = _retract(model, g[:-1], f, 0.5 * h) if finite else None
+    g = np.concatenate([np.asarray(b, dtype=float).reshape(len(b), -1)[:count]
+                        for b in blocks], axis=1) if model.matrix_dims else np.zeros((count, 0))
+    v = node_velocities(model, result.x if model.m else x, f, h)
+    finite = all(np.isfinite(a).all() for a in (x, g, v))
+    middle = _moved(model, x, g, v, 0.5 * h, p) if finite else None
     if middle is None:               # a failed solve's last iterate, off every chart
         return base
-    return replace(base, states=State(v=f.copy(), g=model.configurations(middle)))
+    return replace(base, states=State(v=v, x=middle[0] if model.m else None,
+                                      g=model.configurations(middle[1])))

@@ -68,8 +68,8 @@ def solve_bvp(model, start, end, n_steps: int, h: float | None = None,
 
     Parameters
     ----------
-    start, end : :class:`State` s at t = 0 and t = T (second-order problems on a pair
-        groupoid or matrix Lie groups): ``State(x=q, v=q̇)``, ``State(g=g, v=ξ)``. Each
+    start, end : :class:`State` s at t = 0 and t = T (second-order problems on any
+        groupoid): ``State(x=q, v=q̇)``, ``State(g=g, v=ξ)``, ``State(x=q, g=g, v=…)``. Each
         fixes the element whose midpoint it is; the states are then on the grid t_k = k·h,
         k = 0 … N, the nodes at the half steps, and the cost and path converge at order 2
         on [0, T] (:mod:`.boundary_states`); ``res.states`` holds the solved ones.
@@ -179,11 +179,11 @@ def _solve(model, start, end, N: int, h: float, p, guess, options: SolveOptions,
     info = model.info
     guess = guesses.converted(model, guess, N + from_states, h, p, from_states)
     if from_states:
-        nodes = (boundary_states.element_nodes(model, start, h, "start"),
-                 boundary_states.element_nodes(model, end, h, "end"))
+        nodes = (boundary_states.element_nodes(model, start, h, p, "start"),
+                 boundary_states.element_nodes(model, end, h, p, "end"))
         result = fixed_horizon(model, *nodes, N + 1, h, p, guess, options, (start, end))
         solved = info.free_horizon and len(result.t)    # the horizon found, h = T/N
-        result = boundary_states.attach(model, result, result.T / (N + 1) if solved else h)
+        result = boundary_states.attach(model, result, result.T / (N + 1) if solved else h, p)
     elif info.free_horizon:
         result = free_horizon(
             lambda: fixed_horizon(model, start, end, N, h, p, guess, options),

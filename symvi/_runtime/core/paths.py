@@ -74,7 +74,7 @@ def nodes(model, value, count: int, what: str, first: int = 0) -> tuple[np.ndarr
     x, g = _parse_nodes(model, value, count, what)
     check_configurations(model, g, f"{what} configurations", first)
     check_base_points(model, x, f"{what} base points", first)
-    _check_configured(model, x, g, what, first)
+    check_configured(model, x, g, what, first)
     return x, g
 
 
@@ -90,7 +90,7 @@ def _configured(model, value) -> bool:
     return not pair
 
 
-def _check_configured(model, x: np.ndarray, g: np.ndarray, what: str, first: int) -> None:
+def check_configured(model, x: np.ndarray, g: np.ndarray, what: str, first: int) -> None:
     """Base points that are configuration entries must equal them (a group acting on
     itself, ``ActionGroupoid.on_itself``): otherwise the path inequalities on them would
     hold for another configuration than the path's."""

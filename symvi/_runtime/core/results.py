@@ -223,8 +223,8 @@ class State(metaclass=_Shared):
     the state (the discrete Legendre transform), so that the path approximates the
     solution from that state at the method's order, whatever the step.
 
-    Also the boundary data of a second-order :func:`solve_bvp` at t = 0 and t = T (pair
-    groupoid, matrix Lie groups): each fixes the element whose midpoint it is
+    Also the boundary data of a second-order :func:`solve_bvp` at t = 0 and t = T (every
+    groupoid; a group acting on itself may leave x out): each fixes the element whose midpoint it is
     (:mod:`.boundary_states`). A solve's ``states`` is a State of arrays, one row per
     time."""
 
