@@ -114,3 +114,23 @@ def test_a_state_off_its_manifold_or_of_a_second_order_model_is_refused(compiled
     spline = compiled("cubic_spline")
     with pytest.raises(ValueError, match="a State starts first-order models only"):
         spline.integrate(spline.State(x=[0.0], v=[1.0]), 10, 0.01)
+
+
+def test_a_product_with_an_action_factor_starts_from_a_state(compiled, build_dir):
+    """The heavy top (action groupoid S²×SO(3)) times the pendulum (pair groupoid), their
+    Lagrangians summed, started from one State: its path is the two factors' paths from
+    their own States — each checked against DOP853 at order 2 above — to rounding."""
+    from symvi import Model, ProductGroupoid, State, compile_model
+    top, pendulum = get("heavy_top"), get("pendulum")
+    both = compile_model(Model("top_and_pendulum", ProductGroupoid(top.groupoid,
+                                                                   pendulum.groupoid),
+                               lagrangian=top.lagrangian + pendulum.lagrangian,
+                               parameters=dict(top.parameters) | dict(pendulum.parameters)),
+                         build_dir)
+    h, n = 0.01, 200
+    path = both.integrate(State(x=[0.0, 0.6, 0.8, 0.3], v=[0.5, 0.3, 2.0, 0.1]), n, h)
+    alone = compiled("heavy_top").integrate(State(x=[0.0, 0.6, 0.8], v=[0.5, 0.3, 2.0]), n, h)
+    swing = compiled("pendulum").integrate(State(x=[0.3], v=[0.1]), n, h)
+    assert np.abs(path.x[:, :3] - alone.x).max() <= 1e-13
+    assert np.abs(path.g - alone.g).max() <= 1e-13
+    assert np.abs(path.x[:, 3:] - swing.x).max() <= 1e-13
