@@ -12,7 +12,7 @@ from .core import arguments
 from .core.geometry import check_configurations
 from .core.model_info import Kernel, KernelInfo, ModelInfo, kernel_name
 from .core.options import SolveOptions, StepOptions
-from .core.paths import increments, initial_layout
+from .core.paths import check_configured, held, increments, initial_layout
 from .core.results import State
 from .step.batch import integrate_many
 from .step.legendre import first_fibres, state_arrays
@@ -276,11 +276,19 @@ class CompiledModel:
         return increments(self, g, h, params)
 
     def state_parts(self, state: State) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """The position x, velocity v and flat configuration g₀ of ``state``, checked."""
-        x, v = state_arrays(self, state)
+        """The position x, velocity v and flat configuration g₀ of ``state``, checked.
+        Where every base coordinate is an entry of g (a group acting on itself) x may be
+        left out — it is g's entries — and a given x must be them."""
         g0 = self.configuration(state.g, "the state's configuration g")
         if self.matrix_dims:
             check_configurations(self, g0[None, :], "the state's configuration g")
+        if state.x is None and held(self):
+            state = State(v=state.v, x=g0[list(self.info.configuration_base)], g=state.g)
+        x, v = state_arrays(self, state)
+        if self.m:
+            check_configured(self, x[None, :], g0[None, :], "the state's", 0,
+                             "State(v=..., g=...), x filled from g (the identity unless "
+                             "given),")
         return x, v, g0
 
     def initial_state(self, initial, h: float | None = None,

@@ -30,7 +30,9 @@ def filter_step(ip, path: Path, res, ab, bw: int, delta, ds, dz, Gd, error: floa
         ip.filter_mu = ip.mu
     shift = ip.inertia_shift(path, bw, problem.shift)
     direction = (delta, ds, dz, Gd)
-    if shift > 0.0:
+    # inf: no shift up to MAX_SHIFT makes the step descend (inertia_shift): no solve
+    # (inf·0 on the unshifted rows filled the matrix with NaN), the merit's steps next
+    if 0.0 < shift < np.inf:
         try:
             shifted = problem.solve(ab, bw, -res, shift * ip.scale, ip.nodes)
             direction = (shifted, *ip.steps(shifted, path, ip.mu * ip.unit, c))

@@ -39,6 +39,7 @@ import math
 import numpy as np
 
 from ..bvp.band import cholesky_pivot
+from ..bvp.diagnosis import diagnose
 from .barrier import BOUND_TOLERANCE, Inequalities, boundary_step, next_barrier
 from .vertex import fixes_every_unknown
 from .filter_steps import filter_step
@@ -230,7 +231,8 @@ class InteriorPoint:
                 path, status, message = self.iteration(path, it)
             except LinAlgError as exc:
                 return path, it, Status.SINGULAR_JACOBIAN, (
-                    f"singular Newton matrix at interior-point iteration {it} ({exc})")
+                    f"singular Newton matrix at interior-point iteration {it} ({exc})"
+                    f"{self._why_singular(path)}")
             self.log.report(it, f": {status.name}" if status is not None else "")
             if status in (Status.STALLED, Status.MAX_ITERATIONS):
                 return self._failed(path, it + 1, status, message)
@@ -662,6 +664,17 @@ class InteriorPoint:
         limit: a false SADDLE at a verified minimum). The active-set Newton's test of
         dropped rows uses them too (:mod:`.polish`)."""
         return np.maximum((self.inequalities.jacobian ** 2).sum(axis=2), 1e-300)
+
+    def _why_singular(self, path: Path) -> str:
+        """Why the Newton matrix is singular where the constraints or end conditions are
+        the cause (:func:`.bvp.diagnosis.diagnose`: dependent, or not to be met from
+        ``path``), as the solve without inequalities says it: the KKT matrix has the rows
+        of A = ∂(Φ_d, ψ)/∂η, and dependent rows (nine end conditions on the entries of
+        an SE(2) configuration and ξ, whose group has three directions) make it
+        singular whatever the barrier adds to W."""
+        found = diagnose(self.problem, path)
+        return "" if found is None else found.describe(path.x.shape[0] - 1,
+                                                         self.problem.step(path))
 
     def inertia_shift(self, path: Path, bw: int, start: float) -> float:
         """The inertia correction of the step (Wächter & Biegler 2006, §3.1, with

@@ -26,7 +26,7 @@ import numpy as np
 from ..core import arguments
 from ..core.geometry import check_base_points, check_configurations
 from ..core.model_info import Kernel
-from ..core.paths import check_configured, node_velocities
+from ..core.paths import check_configured, held, node_velocities
 from ..core.results import BVPResult, State
 
 
@@ -78,9 +78,8 @@ def _node(model, state: State, what: str) -> tuple[np.ndarray, np.ndarray]:
     g = model.configuration(state.g, f"the {what} state's configuration g")
     if model.matrix_dims:
         check_configurations(model, g[None], f"the {what} state's configuration g")
-    base = np.asarray(model.info.configuration_base, dtype=int)
-    if model.m and state.x is None and base.size and (base >= 0).all():
-        x = g[base]
+    if model.m and state.x is None and held(model):
+        x = g[np.asarray(model.info.configuration_base, dtype=int)]
     else:
         x = arguments.finite_array(state.x, (model.m,), f"the {what} state's position x") \
             if model.m else np.zeros(0)

@@ -78,34 +78,55 @@ def nodes(model, value, count: int, what: str, first: int = 0) -> tuple[np.ndarr
     return x, g
 
 
+def held(model) -> bool:
+    """Whether every base coordinate is an entry of the configuration (a group acting on
+    itself, ``ActionGroupoid.on_itself``, alone or with other group factors): then the
+    configurations alone determine the base points."""
+    base = model.info.configuration_base
+    return bool(base) and min(base) >= 0
+
+
+def _axes(value) -> int:
+    """The number of array axes of ``value``; a sequence of arrays of different shapes
+    (one per group factor: SE(2)'s 3×3 and SE(3)'s 4×4) has one more than its fewest."""
+    try:
+        return int(np.ndim(value))
+    except ValueError:
+        return 1 + min(_axes(part) for part in value)
+
+
 def _configured(model, value) -> bool:
     """Whether ``value`` holds configurations alone where every base coordinate is an
     entry of the configuration (a group acting on itself): not an (x, g) pair, whose x
     is a 2-D array of base points."""
-    base = model.info.configuration_base
-    if not base or min(base) < 0 or isinstance(value, Resampled):
+    if not held(model) or isinstance(value, Resampled):
         return False
     pair = isinstance(value, (tuple, list)) and len(value) == 2 \
-        and np.ndim(value[0]) == 2 and np.ndim(value[1]) >= 3
+        and _axes(value[0]) == 2 and _axes(value[1]) >= 3
     return not pair
 
 
-def check_configured(model, x: np.ndarray, g: np.ndarray, what: str, first: int) -> None:
+def check_configured(model, x: np.ndarray, g: np.ndarray, what: str, first: int = 0,
+                     alone: str = "the configurations alone (their base points are filled "
+                                  "from them)") -> None:
     """Base points that are configuration entries must equal them (a group acting on
     itself, ``ActionGroupoid.on_itself``): otherwise the path inequalities on them would
-    hold for another configuration than the path's."""
+    hold for another configuration than the path's, and a step map's base points (the
+    dynamics) would follow another path than its configurations. ``alone`` is the data
+    without base points the caller accepts, offered where every base coordinate is an
+    entry."""
     base = np.asarray(model.info.configuration_base, dtype=int)
-    held = np.flatnonzero(base >= 0)
-    if not held.size or not x.shape[0]:
+    held_at = np.flatnonzero(base >= 0)
+    if not held_at.size or not x.shape[0]:
         return
-    gap = np.abs(x[:, held] - g[:, base[held]]) / (1.0 + np.abs(g[:, base[held]]))
+    gap = np.abs(x[:, held_at] - g[:, base[held_at]]) / (1.0 + np.abs(g[:, base[held_at]]))
     k, i = np.unravel_index(np.argmax(gap), gap.shape)
     if gap[k, i] > 1e-9:
+        advice = f"{alone} or base points" if held(model) else "base points"
         raise ValueError(
-            f"{what} base point {model.info.coordinate_names[held[i]]} of node {first + k} is "
-            f"{x[k, held[i]]:.12g}, but the configuration's entry it stands for is "
-            f"{g[k, base[held[i]]]:.12g}: give the configurations alone (their base points "
-            f"are filled from them) or base points equal to their entries")
+            f"{what} base point {model.info.coordinate_names[held_at[i]]} of node {first + k} "
+            f"is {x[k, held_at[i]]:.12g}, but the configuration's entry it stands for is "
+            f"{g[k, base[held_at[i]]]:.12g}: give {advice} equal to their entries")
 
 
 def _parse_nodes(model, value, count: int, what: str) -> tuple[np.ndarray, np.ndarray]:
@@ -363,21 +384,30 @@ def _read_nodes(model, initial) -> tuple[np.ndarray, np.ndarray]:
 def _read_elements(model, initial) -> tuple[np.ndarray, np.ndarray]:
     """``(x_0, g_0, f)``: the first base point, the configurations of the matrix-group
     factors (one (d, d) matrix, or a sequence of them; optional, identity by default)
-    and the first K−1 fibre parts; ``(g_0, f)`` without base points."""
+    and the first K−1 fibre parts; ``(g_0, f)`` without base points, or where every base
+    coordinate is an entry of g (a group acting on itself: x_0 is filled from g_0, and a
+    given x_0 must be its entries, :func:`check_configured` — the step map moves x_0 and
+    g_0 by the same increments, so a base point off g_0 makes a path whose
+    configurations are not its base points)."""
     K, m = model.stencil_elements, model.m
     parts = list(initial) if isinstance(initial, (tuple, list)) else [initial]
-    x0 = [] if m == 0 else parts.pop(0) if parts else None
+    alone = held(model) and len(parts) == 2 and _axes(parts[0]) >= 2
+    x0 = [] if m == 0 or alone else parts.pop(0) if parts else None
     fibres = parts.pop() if parts else None
     if fibres is None or len(parts) > 1:
         layout = "(g_0, f)" if m == 0 else "(x_0, f) or (x_0, g_0, f)"
         raise ValueError(f"initial data must be {layout}")
     fibres = arguments.finite_array(fibres, (K - 1, model.n),
                                     f"initial increments (the first {K - 1} fibre parts)")
-    x0 = arguments.finite_array(x0, (m,), "initial base point x_0")
-    check_base_points(model, x0[None, :], "initial base point x_0")
     g0 = model.configuration(parts[0] if parts else None)
     if model.matrix_dims:
         check_configurations(model, g0[None, :], "initial configuration g_0")
+    if alone:
+        x0 = g0[list(model.info.configuration_base)]
+    x0 = arguments.finite_array(x0, (m,), "initial base point x_0")
+    check_base_points(model, x0[None, :], "initial base point x_0")
+    check_configured(model, x0[None, :], g0[None, :], "initial", 0,
+                     "(g_0, f), x_0 filled from g_0 (the identity unless given),")
     return np.concatenate([x0, fibres.reshape(-1)]), g0
 
 

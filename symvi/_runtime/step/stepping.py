@@ -58,7 +58,9 @@ def integrate(model, initial, n_steps: int, h: float, params: Mapping[str, float
         first 2r nodes q_0, …, q_{2r−1} as an array (2r, n) (r the order). Matrix Lie
         group: ``(g_0, xi)`` with g_0 the initial configuration (d, d) and xi the first
         2r−1 increments ξ_k (2r−1, n). Action groupoids and products: ``(x_0, f)`` or
-        ``(x_0, g_0, f)`` (see :meth:`CompiledModel.initial_state`).
+        ``(x_0, g_0, f)`` (see :meth:`CompiledModel.initial_state`). A group acting on
+        itself (``ActionGroupoid.on_itself``): ``(g_0, f)`` or ``State(g=g0, v=xi0)``,
+        x_0 filled from g_0; a given x_0 must be g_0's entries.
     n_steps : the number of steps: the result has n_steps elements, n_steps + 1 nodes on
         [0, n_steps·h], the first K − 1 elements — from the transform, or given — counted
         among them (at least K − 1: one on a first-order model, three on a second-order
