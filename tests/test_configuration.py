@@ -269,3 +269,14 @@ def test_end_conditions_on_the_configuration(build_dir, world_flyer):
     res = nine.solve_bvp(start, end, 40, 0.1)
     assert res.status.name == "SINGULAR_JACOBIAN"
     assert "the end conditions 's', 'c', 'c2', 's2' are dependent" in res.message
+
+
+def test_the_step_map_of_a_bounded_model_says_it_ignores_the_inequalities(compiled):
+    """integrate on a model with inequalities steps the equations without them (a hunt:
+    from the flyer's optimum the run entered its keep-out disc with SUCCESS and no word):
+    its message says so."""
+    mod = compiled("planar_flyer")
+    ex = get("planar_flyer").example
+    best = mod.solve_bvp(ex.start, ex.end, 100, 0.04)
+    run = mod.integrate((best.x[0], best.g[0], best.f[:3]), 100, 0.04)
+    assert "without the 7 inequalities, which bind solve_bvp only" in run.message

@@ -336,6 +336,12 @@ class _Run:
                 for name, (lag, _, _) in self.fields.items()}
         if status == Status.SUCCESS:
             status, message = finite(out, message, self.h * self.keep)
+        if self.model.info.inequalities:
+            # the step map is the problem's without its inequalities (z = 0): a run from an
+            # optimum's data entered the planar flyer's keep-out disc (a hunt)
+            message += (f"; the step map integrates the equations without the "
+                        f"{len(self.model.info.inequalities)} inequalities, which bind "
+                        f"solve_bvp only: this path need not satisfy them")
         if self.G:
             out["g"] = self.model.configurations(out["g"])
         out["t"] = node_times(out["x"].shape[0], self.keep, self.h)
