@@ -11,7 +11,6 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-import sympy as sp
 
 from symvi import Model, PairGroupoid
 from symvi.build import compile_model

@@ -107,7 +107,8 @@ def compare(hand: HandDerived, model=None, discrete: DiscreteModel | None = None
     sampled verdict stands. Where the symbolic comparison cannot show two forms equal
     (sin(q₁ − q₂) against its expansion, after the simplification it does) the sampled
     verdict decides too; an exact symbolic proof of agreement decides over a sampled
-    disagreement."""
+    disagreement. ``memo``, a dict the caller keeps across displays, holds the unknowns
+    chosen for each derived system (the displays of one target share them)."""
     model = hand.model if hand.model is not None else model
     if model is None:
         raise ValueError(f"{hand.name}: no model to compare with")
@@ -219,8 +220,9 @@ def _from_sampled(verdict: Sampled | None, hand: Hand, spec: HandDerived, unknow
                   note: str) -> list:
     """Row results from the sampled verdict alone, when the location was cut."""
     if verdict is None or not verdict.decided:
-        return [EquationResult(label, False, f"no verdict: the sampled points could not "
-                                             f"be evaluated and the {note}")
+        why = ("the display uses undefined symbols or functions" if hand.undefined
+               or hand.functions else "the sampled points could not be evaluated")
+        return [EquationResult(label, False, f"no verdict: {why}, and the {note}")
                 for label in spec.labels]
     results = [EquationResult(label, ok, (
         f"agrees at {POINTS} random points" if ok else
