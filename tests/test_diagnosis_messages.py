@@ -70,5 +70,6 @@ def test_rail_cart_asked_off_its_rail_is_told_the_end_conditions_are_unreachable
             "the value") in result.message
     assert result.message.endswith(
         ", nor at the path varied — the end conditions ask for motion that the constraints "
-        "forbid. Change the end conditions or leave these constraints out of the model")
+        "forbid. Change the end conditions: no path that keeps these constraints joins "
+        "them")
     assert "degenerate" not in result.message

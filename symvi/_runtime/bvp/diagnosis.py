@@ -105,11 +105,11 @@ class ConstraintDiagnosis:
                    f"{varied}" if np.isinf(self.reach) else
                    f"can be met to first order only by a correction {self.reach:.3g} times "
                    f"the path's size")
-            remedy = ("actuate these directions" if self.controlled else
-                      "leave these constraints out of the model")
+            remedy = ("Change the end conditions or actuate these directions"
+                      if self.controlled else "Change the end conditions: no path that "
+                      "keeps these constraints joins them")
             return (f"; {subject} {how} — the end conditions ask for motion that "
-                    f"{self._produced}{self._motion(N * h)}. Change the end conditions or "
-                    f"{remedy}")
+                    f"{self._produced}{self._motion(N * h)}. {remedy}")
         return (f"; {subject} {'are' if plural else 'is'} dependent ({self.dependent} "
                 f"combination{'s' if self.dependent > 1 else ''} of them without gradient "
                 f"at this path): no path between these ends changes those combinations, "
