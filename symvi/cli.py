@@ -357,7 +357,8 @@ def parser() -> argparse.ArgumentParser:
     k.add_argument("--budget", type=arguments.budget, default=DEFAULT_BUDGET, metavar="SECONDS",
                    help=f"each check's time budget (default {DEFAULT_BUDGET:g}; 'none': "
                         f"unlimited): past it the costly optional parts (the singular "
-                        f"locus) are skipped with a note, never a verdict")
+                        f"locus, where a hand display differs) are skipped with a note, "
+                        f"never a verdict")
     k.set_defaults(func=_check)
     ls = sub.add_parser("list", help="list the bundled models")
     ls.set_defaults(func=_list)

@@ -1,9 +1,11 @@
 """The time budget of each check (issue 26): optional, costly parts are attempted within
 what is left of it and skipped with a note past it; the verdict never is.
 
-The costly part known so far is the regularity check's singular locus: factoring the
+The costly parts known so far are the regularity check's singular locus — factoring the
 determinant of the step matrix took 222 s on a planar Kepler model, whose rank (the
-verdict) takes milliseconds. The part is interrupted at the budget by
+verdict) takes milliseconds — and the equations check's symbolic location of where a
+display differs, after its verdict at sampled points (:mod:`.sampled`): solving a triple
+pendulum's 3×3 mass matrix symbolically ran 32 minutes (issue 53). A part is interrupted at the budget by
 :func:`symvi.timing.interrupted_after` (main thread only; elsewhere it is attempted only
 while budget is left, and runs to its end).
 """

@@ -32,9 +32,12 @@ from scipy.optimize import linear_sum_assignment
 
 from ..discretisation.discretise import DiscreteModel, discretise
 from ..errors import ModelError
+from .budget import SKIPPED, Budget
 from .hand import HandDerived
 from .equivalence import (Hand, coefficient_note, in_controls, is_zero, limit_note,
-                          linear_unknowns, matrix_rank, scaled_increments, show, solve_linear)
+                          linear_unknowns, matrix_rank, scaled_increments, show, simplified,
+                          solve_linear)
+from .sampled import POINTS, Sampled, sampled_equations, sampled_values
 from .spaces import ALGEBROID, CONTINUOUS, Space, symbol_space
 from .report import CheckResult
 
@@ -65,6 +68,8 @@ class Comparison:
     undefined: tuple[str, ...] = ()
     #: a note per function of time that names no model quantity
     functions: tuple[str, ...] = ()
+    #: why the location of the differences was cut (the check's time budget), if it was
+    cut: str = ""
 
     def details(self) -> list[str]:
         """One line per problem, each starting with the display's name (its location)."""
@@ -76,22 +81,34 @@ class Comparison:
         lines += [f"{self.hand.name}, {r.label}: {r.message}" for r in self.equations if not r.ok]
         if self.equations and not self.ok and all(r.ok for r in self.equations):
             lines.append(f"{self.hand.name}: {self.summary}")
+        if self.cut:
+            lines.append(f"{self.hand.name}: {self.cut}")
         return lines
 
     def to_dict(self) -> dict:
         return {"name": self.hand.name, "target": self.hand.target, "mode": self.hand.mode,
                 "ok": self.ok, "summary": self.summary, "undefined": list(self.undefined),
-                "functions": list(self.functions),
+                "functions": list(self.functions), "cut": self.cut,
                 "equations": [r.to_dict() for r in self.equations]}
 
 
 # -- helpers ------------------------------------------------------------------------------
 # -- the comparison -----------------------------------------------------------------------
 def compare(hand: HandDerived, model=None, discrete: DiscreteModel | None = None,
-            derived=None) -> Comparison:
+            derived=None, budget: Budget | None = None, seed: int = 20261121,
+            memo: dict | None = None) -> Comparison:
     """Compare ``hand`` with the derived object it targets on ``model`` (``hand.model``
     when given). ``discrete`` (``discretise(model)``) and ``derived`` (``derive(...)``) are
-    reused when passed."""
+    reused when passed.
+
+    The verdict comes first from sampled points (:mod:`.sampled`); the symbolic location
+    of the differences (and the pairing of agreeing rows with derived equations) after
+    it, within ``budget`` when given — past it the location is cut with a note and the
+    sampled verdict stands. Where the symbolic comparison cannot show two forms equal
+    (sin(q₁ − q₂) against its expansion, after the simplification it does) the sampled
+    verdict decides too; an exact symbolic proof of agreement decides over a sampled
+    disagreement. ``memo``, a dict the caller keeps across displays, holds the unknowns
+    chosen for each derived system (the displays of one target share them)."""
     model = hand.model if hand.model is not None else model
     if model is None:
         raise ValueError(f"{hand.name}: no model to compare with")
@@ -99,7 +116,7 @@ def compare(hand: HandDerived, model=None, discrete: DiscreteModel | None = None
         space = symbol_space(hand, model, discrete, derived)
     except ModelError as exc:
         return Comparison(hand, False, f"cannot compare with {hand.target}: {exc}")
-    derived_exprs = space.derived
+    derived_exprs = [simplified(e) for e in space.derived]
     if hand.select is not None:
         bad = [i for i in hand.select if not 0 <= i < len(derived_exprs)]
         if bad:
@@ -112,17 +129,33 @@ def compare(hand: HandDerived, model=None, discrete: DiscreteModel | None = None
             s.name in controls for e in resolved.math for s in e.free_symbols):
         rewritten = in_controls(space, derived_exprs)
         if rewritten is not None:
-            derived_exprs = rewritten
+            derived_exprs = [simplified(e) for e in rewritten]
         else:
             resolved.math = [e.xreplace(dict(space.controls)) for e in resolved.math]
+    functions = tuple(dict.fromkeys(resolved.functions.values()))
+    key = (tuple(derived_exprs), hand.unknowns)
+    memo = {} if memo is None else memo
+    unknowns = memo[key] if key in memo else memo.setdefault(
+        key, _unknowns(hand, derived_exprs, space))
+    verdict = None if resolved.undefined or resolved.functions or isinstance(unknowns, str) \
+        else (sampled_values(resolved.math, derived_exprs, seed) if hand.mode == "value"
+              else sampled_equations(resolved.math, derived_exprs, unknowns,
+                                     space.variables, seed))
     if hand.mode == "value":
-        results = _compare_values(resolved, derived_exprs, hand)
+        locate = (_compare_values, resolved, derived_exprs, hand)
     else:
-        results = _compare_equations(resolved, derived_exprs, hand, space)
+        locate = (_compare_equations, resolved, derived_exprs, hand, space, unknowns, verdict)
+    label = f"location of the differences in {hand.name}"
+    results = locate[0](*locate[1:]) if budget is None else budget.attempt(label, *locate)
+    cut = results is SKIPPED
+    if cut:
+        results = _from_sampled(verdict, resolved, hand, unknowns, budget.note(label))
+    elif verdict is not None and verdict.decided and not isinstance(results, str):
+        results = _with_sampled(results, verdict, hand)
     if isinstance(results, str):
-        return Comparison(hand, False, results, (), resolved.undefined,
-                          tuple(dict.fromkeys(resolved.functions.values())))
-    if hand.target == "discrete_action" and not all(r.ok for r in results):
+        return Comparison(hand, False, results, (), resolved.undefined, functions)
+    results = _missing_rows(results, resolved, derived_exprs, hand, space.variables, seed)
+    if hand.target == "discrete_action" and not all(r.ok for r in results) and not cut:
         results = _miscounted_terms(hand, model, discrete) or results
     ok = all(r.ok for r in results) and not resolved.undefined and not resolved.functions
     wrong = [r.label for r in results if not r.ok]
@@ -132,8 +165,92 @@ def compare(hand: HandDerived, model=None, discrete: DiscreteModel | None = None
         summary = f"differs from the derived {hand.target} in {', '.join(wrong)}"
     else:
         summary = "uses undefined symbols or functions"
-    return Comparison(hand, ok, summary, tuple(results), resolved.undefined,
-                      tuple(dict.fromkeys(resolved.functions.values())))
+    return Comparison(hand, ok, summary, tuple(results), resolved.undefined, functions,
+                      budget.note(label) if cut else "")
+
+
+def _unknowns(hand: HandDerived, derived: list, space: Space):
+    """The unknowns the derived equations are solved for: the display's own, else those
+    in which they are linear (:func:`.equivalence.linear_unknowns`); None for values or
+    where there are none; a message when the display names unknowns the model lacks."""
+    if hand.mode == "value":
+        return None
+    names = hand.unknowns
+    if any(u not in space.names for u in names):
+        return f"unknowns {[u for u in names if u not in space.names]} are not model symbols"
+    unknowns = ([space.names[u] for u in names] if names else
+                linear_unknowns(derived, space.candidates, space.fixed))
+    return unknowns if unknowns and len(unknowns) == len(derived) else None
+
+
+def _missing_rows(results: list, hand: Hand, derived: list, spec: HandDerived,
+                  variables, seed: int) -> list:
+    """A display with fewer rows than the derived equations, whose rows agree: its
+    "system" result names the derived equations no row is (by sampled proportionality),
+    written out, and what the target holds (:data:`TARGET_HOLDS`) — the ``constraints`` of
+    a nonholonomic model are its kinematic constraints too, not only the unactuated
+    equations."""
+    if len(hand.math) >= len(derived) or spec.select is not None \
+            or not any(r.label == "system" and not r.ok for r in results):
+        return results
+    pairs = sampled_equations(hand.math, derived, None, variables, seed).pairs
+    missing = [j for j in range(len(derived)) if j not in pairs]
+    if not missing:
+        return results
+    listed = "; ".join(f"eq. {j + 1}: {show(hand.show(derived[j]))} = 0" for j in missing)
+    rows = f"{len(hand.math)} row{'s' * (len(hand.math) > 1)}"
+    text = (f"{rows} for the {len(derived)} derived {spec.target}; no row is {listed}. "
+            f"{TARGET_HOLDS.get(spec.target, 'Give every derived equation')}, or compare "
+            f"some of them with select=")
+    return [EquationResult(r.label, False, f"{r.message} — {text}") if r.label == "system"
+            else r for r in results]
+
+
+#: What a display of a target must hold besides the equations it is named after.
+TARGET_HOLDS = {
+    "constraints": "The constraints target is every constraint of the model, in its order: "
+                   "on a nonholonomic model the kinematic constraints (the velocities lie "
+                   "in the distribution) as well as the unactuated equations of motion",
+    "euler_lagrange": "The euler_lagrange target holds the constraints Φ^A = 0 after the "
+                      "Euler–Lagrange equations",
+}
+
+
+def _from_sampled(verdict: Sampled | None, hand: Hand, spec: HandDerived, unknowns,
+                  note: str) -> list:
+    """Row results from the sampled verdict alone, when the location was cut."""
+    if verdict is None or not verdict.decided:
+        why = ("the display uses undefined symbols or functions" if hand.undefined
+               or hand.functions else "the sampled points could not be evaluated")
+        return [EquationResult(label, False, f"no verdict: {why}, and the {note}")
+                for label in spec.labels]
+    results = [EquationResult(label, ok, (
+        f"agrees at {POINTS} random points" if ok else
+        f"differs from the derived {spec.target} at {POINTS} random points; where is not "
+        f"located: {note}")) for label, ok in zip(spec.labels, verdict.rows)]
+    if all(verdict.rows) and verdict.rank is not None and verdict.rank < verdict.unknowns:
+        results.append(_underdetermined(verdict, hand, unknowns))
+    return results
+
+
+def _underdetermined(verdict: Sampled, hand: Hand | None = None,
+                     unknowns=()) -> EquationResult:
+    """The display's rows agree but determine only ``verdict.rank`` of the unknowns."""
+    named = f" {', '.join(str(hand.show(u)) for u in unknowns)}" if hand and unknowns else ""
+    return EquationResult("system", False, f"determines only {verdict.rank} of the "
+                                           f"{verdict.unknowns} unknowns{named}: an equation "
+                                           f"is missing or two are dependent")
+
+
+def _with_sampled(results: list, verdict: Sampled, spec: HandDerived) -> list:
+    """The located results under the sampled verdict: a row the symbolic comparison could
+    not show equal, but which agrees at the sampled points, agrees (two forms the
+    simplification did not bring together); rows that differ keep their location."""
+    rows = dict(zip(spec.labels, verdict.rows))
+    return [EquationResult(r.label, True, f"agrees at {POINTS} random points (forms the "
+                                          f"symbolic comparison did not reduce to one)")
+            if not r.ok and rows.get(r.label) else r for r in results]
+
 
 
 def _miscounted_terms(hand: HandDerived, model, discrete) -> list | None:
@@ -214,21 +331,26 @@ def _pairing(hand: Hand, derived: list) -> list:
     most like one equation are paired with three equations, so that each row's
     difference is told against its own. A row left over (more rows than equations) is
     paired with the equation it matches best."""
-    located = [[hand.locate(i, D) for D in derived] for i in range(len(hand.math))]
+    located = [[hand.locate(i, D, described=False) for D in derived]
+               for i in range(len(hand.math))]
     if not located or not derived:
         return [None] * len(located)
     cost = np.array([[_UNPAIRED if at.scale is None else
-                      _LINEAR * at.linear + len(at.groups) + _OFF_DIAGONAL * (i != j)
+                      _LINEAR * at.linear + at.count + _OFF_DIAGONAL * (i != j)
                       for j, at in enumerate(row)] for i, row in enumerate(located)])
     rows, columns = linear_sum_assignment(cost)
-    pairing = [None] * len(located)
+    chosen = [None] * len(located)
     for i, j in zip(rows, columns):
         if located[i][j].scale is not None:
-            pairing[i] = (j, located[i][j].scale, located[i][j].groups)
+            chosen[i] = j
     for i, row in enumerate(located):
-        if pairing[i] is None and cost[i].min() < _UNPAIRED:
-            j = int(np.argmin(cost[i]))
-            pairing[i] = (j, row[j].scale, row[j].groups)
+        if chosen[i] is None and cost[i].min() < _UNPAIRED:
+            chosen[i] = int(np.argmin(cost[i]))
+    pairing = [None] * len(located)
+    for i, j in enumerate(chosen):
+        if j is not None:
+            at = hand.locate(i, derived[j], located[i][j].scale)
+            pairing[i] = (j, at.scale, at.groups)
     return pairing
 
 
@@ -239,9 +361,12 @@ def _pairing(hand: Hand, derived: list) -> list:
 _UNPAIRED, _LINEAR, _OFF_DIAGONAL = 1e6, 100.0, 1e-3
 
 
-def _compare_equations(hand: Hand, derived: list, spec: HandDerived, space: Space):
-    """``mode="equations"``: paired term by term, else by solving the derived system for
-    unknowns in which it is linear; a result string when the unknowns are not symbols."""
+def _compare_equations(hand: Hand, derived: list, spec: HandDerived, space: Space,
+                       unknowns, verdict: Sampled | None = None):
+    """``mode="equations"``: paired term by term; a row not matched so is decided by the
+    sampled ``verdict`` where it decided, else by solving the derived system for
+    ``unknowns`` (:func:`_unknowns`) symbolically — the step that cost the triple
+    pendulum's 32 minutes. A result string when the unknowns are not symbols."""
     n = len(derived)
     pairing = _pairing(hand, derived)
 
@@ -261,12 +386,17 @@ def _compare_equations(hand: Hand, derived: list, spec: HandDerived, space: Spac
         scale = "" if c == 1 else f" × {show(c)}"
         return f"vs derived eq. {j + 1}{scale}: " + "; ".join(groups or ["differs"])
 
-    names = spec.unknowns
-    if any(u not in space.names for u in names):
-        return f"unknowns {[u for u in names if u not in space.names]} are not model symbols"
-    unknowns = ([space.names[u] for u in names] if names else
-                linear_unknowns(derived, space.candidates, space.fixed))
-    if not unknowns or len(unknowns) != n:
+    if isinstance(unknowns, str):
+        return unknowns
+    if verdict is not None and verdict.decided and unknowns:
+        results = [EquationResult(spec.labels[i], True, matched(i) if exact[i] else
+                                  "a combination of the derived equations") if ok else
+                   EquationResult(spec.labels[i], False, differs(i))
+                   for i, ok in enumerate(verdict.rows)]
+        if all(verdict.rows) and verdict.rank < n:
+            results.append(_underdetermined(verdict, hand, unknowns))
+        return results
+    if not unknowns:
         results = [EquationResult(spec.labels[i], exact[i], matched(i) if exact[i]
                                   else differs(i)) for i in range(len(pairing))]
         if all(exact):
@@ -287,10 +417,7 @@ def _compare_equations(hand: Hand, derived: list, spec: HandDerived, space: Spac
         J = sp.Matrix(hand.math).jacobian(unknowns).xreplace(solution)
         rank = matrix_rank(J, space.fixed)
         if rank < n:
-            results.append(EquationResult(
-                "system", False, f"determines only {rank} of the {n} unknowns "
-                f"{', '.join(str(hand.show(u)) for u in unknowns)}: an equation is missing "
-                f"or two are dependent"))
+            results.append(_underdetermined(Sampled((), rank, n), hand, unknowns))
     return results
 
 
@@ -300,7 +427,7 @@ def run(ctx) -> CheckResult:
     if not ctx.equations:
         return CheckResult.skipped(NAME, "no hand-derived equations given (a paper fixture "
                                          "or a model file's `equations`)")
-    comparisons = []
+    comparisons, memo = [], {}
     for hand in ctx.equations:
         if not isinstance(hand, HandDerived):
             return CheckResult.failed(NAME, f"equations must be HandDerived objects, got "
@@ -308,7 +435,8 @@ def run(ctx) -> CheckResult:
         own = hand.model is None or hand.model is ctx.model
         discrete = ctx.discrete if own and hand.target not in CONTINUOUS + ALGEBROID else None
         derived = ctx.derived if own and hand.target == "residual" else None
-        comparisons.append(compare(hand, ctx.model, discrete, derived))
+        comparisons.append(compare(hand, ctx.model, discrete, derived, ctx.budget, ctx.seed,
+                                   memo))
     data = {"comparisons": [c.to_dict() for c in comparisons]}
     failed = [c for c in comparisons if not c.ok]
     if not failed:

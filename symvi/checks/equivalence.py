@@ -28,9 +28,6 @@ from .spaces import Space
 if TYPE_CHECKING:
     from .hand import HandDerived
 
-_MAX_GROUPS = 8
-
-
 # -- symbols and expressions --------------------------------------------------------------
 def _plain(expr: sp.Expr) -> sp.Expr:
     """Every symbol replaced by a plain Symbol of its name (symbols compare by name)."""
@@ -111,6 +108,39 @@ def is_zero(expr: sp.Expr) -> bool:
     return False
 
 
+def simplified(expr: sp.Expr) -> sp.Expr:
+    """``expr`` with sin²x + cos²x = 1 applied where it shortens it: each sin(x)^k, k ≥ 2,
+    becomes sin(x)^(k−2)·(1 − cos²x) and the result is kept when it has fewer operations
+    (the derived constraints of the Chaplygin sled, m·u̇·(sin²θ + cos²θ) − m·a·ω²·(sin²θ +
+    cos²θ), become m·u̇ − m·a·ω², which a display's terms are located against). A
+    polynomial rewrite, not ``trigsimp``: it costs an expansion, and it never turns a
+    product of sines of the coordinates into a sine of their sum."""
+    sines = [f for f in expr.atoms(sp.sin) if expr.has(sp.cos(f.args[0]))]
+    if not sines:
+        return expr
+    best, size = expr, sp.count_ops(expr)
+    for f in sines:
+        trial = sp.expand(best).replace(
+            lambda e: e.is_Pow and e.base == f and e.exp.is_Integer and e.exp >= 2,
+            lambda e: f ** (e.exp - 2) * (1 - sp.cos(f.args[0]) ** 2))
+        trial = sp.factor_terms(sp.expand(trial))
+        trial_size = sp.count_ops(trial)
+        if trial_size < size:
+            best, size = trial, trial_size
+    return best
+
+
+def aligned(a: sp.Expr, b: sp.Expr) -> tuple[sp.Expr, sp.Expr]:
+    """``a`` and ``b`` with sines and cosines of sums expanded on both when either holds
+    one the other lacks (cos(q₁ − q₂) against sin q₁ sin q₂ + cos q₁ cos q₂, as
+    ``LagrangesMethod`` writes chained frames), so that their terms compare one by one."""
+    trig = (sp.sin, sp.cos)
+    ta, tb = a.atoms(*trig), b.atoms(*trig)
+    if ta == tb or not any(f.args[0].is_Add for f in ta ^ tb):
+        return a, b
+    return simplified(sp.expand_trig(a)), simplified(sp.expand_trig(b))
+
+
 def show(expr: sp.Expr) -> str:
     """``expr`` as written in messages."""
     return sp.sstr(expr)
@@ -185,37 +215,66 @@ class Located(NamedTuple):
     scale: Any
     groups: list
     linear: int = 0
+    #: the differing terms, counted after expansion (which factor c leaves fewest)
+    terms: int = 0
+    #: how many groups differ (``groups`` holds their descriptions when asked for)
+    count: int = 0
 
 
 def _locate(own: sp.Expr, values: dict, derived: sp.Expr, coefficients: set,
-            parameters: set, scale=None) -> Located:
+            parameters: set, scale=None, described: bool = True) -> Located:
     """The factor c that matches ``own`` (hand, user's symbols) to ``derived`` (display
     symbols) and the differing terms of own − c·derived, grouped by the parameters they
     carry, with the count of differing linear terms (how :func:`.equations._pairing`
     tells which equation a row is). ``values`` gives the coefficient symbols' values.
 
-    c is ``scale`` when given (a value claims equality: no factor is free). Otherwise the
-    linear part decides (issue 26, item 1): the ratio most of the linear terms (one
-    unknown — a derivative, a multiplier, a control, a base coordinate — times
-    parameters) agree on; those fix an equation's normalisation, and a slip in the
-    bracket terms (a wrong lift, a sign of the structure constants: C y η, at least
-    quadratic) does not touch them. Where the linear terms do not single out one ratio
-    (none, or a tie), the ratio most of all terms agree on. So a display wrong in most
-    of its terms is not explained by the complement with the opposite sign, a display
-    multiplied by a factor is that factor times a right one, and one wrong coefficient
-    of a linear term is that term."""
+    c is ``scale`` when given (a value claims equality: no factor is free). Otherwise it
+    is chosen among the ratio most of the linear terms (one unknown — a derivative, a
+    multiplier, a control, a base coordinate — times parameters) agree on (where they
+    do not single out one, the ratio most of all shared terms take), the ratio most of
+    all shared terms take, and their opposites: a factor under which every linear term
+    agrees fixes the equation's normalisation (issue 26, item 1) — a slip in the bracket
+    terms (a wrong lift, a sign of the structure constants: C y η, at least quadratic)
+    does not touch them, a display multiplied by a factor is that factor times a right
+    one, and one wrong coefficient of a linear term is that term; among such factors, or
+    where none exists, the one that leaves the fewest differing terms (issue 53: row 6 of
+    the paper's display with A, B, C differs in 43 terms at +1 and 49 at −1). Ties go to
+    the linear terms' ratio. Sines and cosines of sums are expanded on both sides first
+    where the two disagree in them (:func:`aligned`)."""
+    own, derived = aligned(own, derived)
     variables = [s for s in own.free_symbols | derived.free_symbols
                  if s.name not in coefficients | parameters | {"h"}]
     H_own, D = _split(own, variables), _split(derived, variables)
     H = {m: sp.cancel(a.xreplace(values)) for m, a in H_own.items()}
     H = {m: a for m, a in H.items() if a != 0}
+    if scale is not None:
+        return _differences(H_own, H, D, scale, coefficients, parameters, values, described)
     common = [m for m in H if m in D and D[m] != 0]
-    if scale is None:
-        scale = _majority([sp.cancel(H[m] / D[m]) for m in common if m.is_Symbol]) \
-            or _majority([sp.cancel(H[m] / D[m]) for m in common], ties=True)
-    if scale is None:
+    ratios = [sp.cancel(H[m] / D[m]) for m in common]
+    first = _majority([r for m, r in zip(common, ratios) if m.is_Symbol]) \
+        or _majority(ratios, ties=True)
+    if first is None:
         return Located(None, [])
-    c, linear = scale, 0
+    # of the ratios the terms share, and their opposites, the one leaving the fewest
+    # differing terms; the linear terms' majority (issue 26) where they tie
+    overall = _majority(ratios, ties=True)
+    best, fewest = first, None
+    for c in dict.fromkeys([first, -first, overall, -overall]):
+        at = _differences(H_own, H, D, c, coefficients, parameters, values, False)
+        cost = (min(at.linear, 1), at.terms)
+        if fewest is None or cost < fewest:
+            best, fewest = c, cost
+        if at.terms == 0:
+            break
+    return _differences(H_own, H, D, best, coefficients, parameters, values, described)
+
+
+def _differences(H_own: dict, H: dict, D: dict, c, coefficients: set, parameters: set,
+                 values: dict, described: bool = True) -> Located:
+    """The groups of differing terms of own − c·derived (split by monomial: ``H_own`` in
+    the user's symbols, ``H`` their values, ``D`` derived), each described unless not
+    ``described`` (only counted), and how many linear terms and terms in all differ."""
+    linear, terms = 0, 0
     keyed: dict = {}
 
     def key(coeff):
@@ -230,10 +289,12 @@ def _locate(own: sp.Expr, values: dict, derived: sp.Expr, coefficients: set,
             group[3].append(whole)
 
     for m in list(H) + [m for m in D if m not in H]:
-        a, b = H.get(m, sp.S.Zero), sp.cancel(c * D.get(m, sp.S.Zero))
-        if sp.cancel(a - b) == 0:
+        a, b = H.get(m, sp.S.Zero), c * D.get(m, sp.S.Zero)
+        b = b if sp.sympify(c).is_Integer else sp.cancel(b)
+        if _same(a, b):
             continue
         linear += m.is_Symbol
+        terms += len(sp.Add.make_args(sp.expand(a - b)))
         own_term = H_own.get(m, sp.S.Zero) * m
         if a != 0 and b != 0:
             A, B = sp.Add.make_args(sp.expand(a)), sp.Add.make_args(sp.expand(b))
@@ -250,10 +311,20 @@ def _locate(own: sp.Expr, values: dict, derived: sp.Expr, coefficients: set,
             add(key(a), own_term, a * m, sp.S.Zero)
         else:
             add(key(b), sp.S.Zero, sp.S.Zero, b * m)
-    messages = [_describe(*group, coefficients, values) for group in keyed.values()]
-    if len(messages) > _MAX_GROUPS:
-        messages = messages[:_MAX_GROUPS] + [f"… and {len(messages) - _MAX_GROUPS} more"]
-    return Located(c, messages, linear)
+    messages = [_describe(*group, coefficients, values) for group in keyed.values()] \
+        if described else []
+    return Located(c, messages, linear, terms, len(keyed))
+
+
+def _same(a: sp.Expr, b: sp.Expr) -> bool:
+    """a = b for coefficients (rational functions of the parameters): expanded first,
+    which decides polynomials, and cancelled only where a denominator is left."""
+    difference = sp.expand(a - b)
+    if difference == 0:
+        return True
+    if not any(p.exp.is_negative for p in difference.atoms(sp.Pow)):
+        return False
+    return sp.cancel(difference) == 0
 
 
 def _describe(hand_own, hand_value, derived_part, wholes, coefficients: set,
@@ -339,11 +410,14 @@ class Hand:
         return expr.xreplace({s: self.space.names[s.name] for s in expr.free_symbols
                               if s.name in self.space.names})
 
-    def locate(self, i: int, derived: sp.Expr, scale=None) -> Located:
+    def locate(self, i: int, derived: sp.Expr, scale=None, described: bool = True
+               ) -> Located:
         """Where hand expression i differs from ``derived``: at the factor ``scale`` when
-        given, else the one the linear terms fix (:func:`_locate`)."""
+        given, else the one :func:`_locate` chooses; the groups only counted unless
+        ``described``."""
         return _locate(self.own[i], self.coefficients, self.show(derived),
-                       {s.name for s in self.coefficients}, self.parameters, scale)
+                       {s.name for s in self.coefficients}, self.parameters, scale,
+                       described)
 
 
 def in_controls(space: Space, exprs) -> list | None:

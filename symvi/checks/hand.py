@@ -14,9 +14,12 @@ import sympy as sp
 #: target → the derived object it names (paper reference).
 TARGETS: dict[str, str] = {
     "controls": "controlled equations u_a = EL(L)_a, the model's controls (§3.3, eq. costLtilde)",
-    "constraints": "unactuated equations Φ^A = EL(L)_A = 0, the model's constraints (§3.3.2)",
-    "euler_lagrange": "continuous Euler–Lagrange equations EL_r(L + λ_AΦ^A) = 0 with the "
-                      "constraints Φ^A = 0 (§3.3.2, Appendix C.2)",
+    "constraints": "every constraint Φ^A = 0 of the model, in its order (§3.3.2): the "
+                   "unactuated equations EL(L)_A = 0 and, on a nonholonomic model, first the "
+                   "kinematic constraints q̇ = ρ(q)y (the velocities in the distribution); "
+                   "``select`` compares some of them",
+    "euler_lagrange": "continuous Euler–Lagrange equations EL_r(L + λ_AΦ^A) = 0 followed by "
+                      "the constraints Φ^A = 0 (§3.3.2, Appendix C.2)",
     "lagrangian": "continuous Lagrangian L̃ = C(q, y, EL(L)_a) (eq. costLtilde, LagCont)",
     "discrete_lagrangian": "L_d on one window (DESIGN.md §3, eq. sdfinal)",
     "discrete_constraints": "Φ^A_d = h Σ w Φ^A(point) on one window (§3.2, eq. constrainedso)",
@@ -47,7 +50,10 @@ class HandDerived:
     name:
         Where they come from (``"paper eq. CuerpoRigido"``); failures are located by it.
     target:
-        Which derived object they claim to be (:data:`TARGETS`).
+        Which derived object they claim to be (:data:`TARGETS`), all of it unless
+        ``select`` names some of its expressions: a display of fewer equations than
+        the target holds fails with the ones it lacks written out (``constraints`` on
+        the Chaplygin sled is its three kinematic constraints and its forward equation).
     expressions:
         The hand equations: expressions meaning ``= 0``, ``sympy.Eq`` or a Matrix of them
         (``mode="equations"``), or the claimed values (``mode="value"``, one per derived

@@ -20,10 +20,25 @@ ways that a user cannot tell from a stalled line search:
 Both are read from the singular value decomposition of A at the path the solve
 returned: dense, so only up to :data:`DENSE_LIMIT` unknowns (at N ≈ 1000 for three
 fibre directions), which covers the few steps one tries first.
+
+A combination without gradient may be the path's and not the problem's (issue 53): a
+nonholonomic constraint ẏ cos θ − ẋ sin θ = 0 has no gradient toward a sideways
+displacement where the path is at rest with θ constant, as on the straight line between
+two parked poses of a unicycle — yet parking sideways is feasible, by driving while
+turning. So an inconsistent dependency among such constraints (not an optimal-control problem's
+unactuated directions) is looked for again at the path with its free nodes varied
+(:meth:`~.assembly.Problem.perturbed`): where it is gone there, the message blames the
+path (give a guess that moves along the allowed directions), not the end conditions;
+where it stays (a cart on a rail asked off it: Σ_k (y_{k+1} − y_k) = y_N − y_0 at every
+path), the end conditions ask for motion the constraints forbid. The unactuated
+directions' dependencies are not varied: they are the problem's (Noether's telescoping
+sum, exact with the variational equations), but with the paper's rule only to O(h⁴), so
+that at a varied path they are merely ill-conditioned (the torque-only body asked to
+translate: a reach of 15 where the straight path has none).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -58,6 +73,9 @@ class ConstraintDiagnosis:
     #: The boundary data's motion along those directions: (name, start-to-end mean
     #: velocity, velocity at the start, velocity at the end), its components not all 0.
     motion: tuple[tuple[str, float, float, float], ...]
+    #: Whether the inconsistent dependency is this path's only (gone at the path varied:
+    #: True), the problem's (False), or was not looked for again (None).
+    degenerate: bool | None = None
 
     @property
     def unattainable(self) -> bool:
@@ -67,19 +85,32 @@ class ConstraintDiagnosis:
         """The finding and its remedy, for a failed result's message."""
         if self.involved and all(n.startswith("end condition ") for n in self.involved):
             return self._end_conditions()
-        names = ", ".join(self.involved)
         plural = "s" if len(self.involved) > 1 else ""
-        where = f"unactuated direction{plural}" if self._controlled else f"constraint{plural}"
+        subject = self._subject
+        if self.degenerate:
+            return (f"; at this path {subject} {'have' if plural else 'has'} no gradient "
+                    f"along a combination whose value ({self.inconsistency:.3g}) the end "
+                    f"conditions ask to change, but {'they have' if plural else 'it has'} "
+                    f"one once the path's free nodes are varied by 1e-2: the path, not the "
+                    f"problem, is degenerate — a nonholonomic constraint has no gradient "
+                    f"toward the motion it forbids where the path is at rest or moves "
+                    f"straight across it, as a straight line between the ends does. Give "
+                    f"solve_bvp a guess that already moves along the allowed directions "
+                    f"(for a wheeled vehicle moved sideways: driving while turning, forward "
+                    f"then back)")
         if self.unattainable:
-            how = ("cannot be met to first order: a combination of them has no gradient "
-                   f"at this path but the value {self.inconsistency:.3g}"
-                   if np.isinf(self.reach) else
+            varied = ", nor at the path varied" if self.degenerate is False else ""
+            how = (f"cannot be met to first order: {'a combination of them has' if plural else 'it has'} "
+                   f"no gradient at this path but the value {self.inconsistency:.3g}"
+                   f"{varied}" if np.isinf(self.reach) else
                    f"can be met to first order only by a correction {self.reach:.3g} times "
                    f"the path's size")
-            return (f"; the constraint{plural} of the {where} {names} {how} — the end conditions "
-                    f"ask for motion that {self._produced}{self._motion(N * h)}. Change the "
-                    f"end conditions or actuate these directions")
-        return (f"; the constraints of the {where} {names} are dependent ({self.dependent} "
+            remedy = ("Change the end conditions or actuate these directions"
+                      if self.controlled else "Change the end conditions: no path that "
+                      "keeps these constraints joins them")
+            return (f"; {subject} {how} — the end conditions ask for motion that "
+                    f"{self._produced}{self._motion(N * h)}. {remedy}")
+        return (f"; {subject} {'are' if plural else 'is'} dependent ({self.dependent} "
                 f"combination{'s' if self.dependent > 1 else ''} of them without gradient "
                 f"at this path): no path between these ends changes those combinations, "
                 f"the boundary data fix them, their multipliers are not determined and the "
@@ -107,12 +138,24 @@ class ConstraintDiagnosis:
                 f"redundant ones")
 
     @property
-    def _controlled(self) -> bool:
+    def _subject(self) -> str:
+        """What is involved, as a message's subject: "the constraints of the unactuated
+        directions v1, v2", "constraint 2", "constraints 1, 3"."""
+        plural = "s" if len(self.involved) > 1 else ""
+        if self.controlled:
+            return (f"the constraint{plural} of the unactuated direction{plural} "
+                    f"{', '.join(self.involved)}")
+        numbers = [n.removeprefix("constraint ") for n in self.involved]
+        return f"constraint{plural} {', '.join(numbers)}"
+
+    @property
+    def controlled(self) -> bool:
+        """Whether the constraints involved are unactuated directions of optimal control."""
         return not any(n.startswith(("constraint ", "end condition ")) for n in self.involved)
 
     @property
     def _produced(self) -> str:
-        return "no control produces" if self._controlled else "the constraints forbid"
+        return "no control produces" if self.controlled else "the constraints forbid"
 
     def _motion(self, T: float) -> str:
         if not self.motion:
@@ -122,10 +165,11 @@ class ConstraintDiagnosis:
         return f" (the boundary data's velocities along them — {parts})"
 
 
-def diagnose(problem, path: Path) -> ConstraintDiagnosis | None:
+def diagnose(problem, path: Path, vary: bool = True) -> ConstraintDiagnosis | None:
     """The :class:`ConstraintDiagnosis` of ``path``, or None where it finds nothing (no
     dependency, no unattainable correction), the model has no constraints or declared
-    gauges, or A is too large to decompose densely."""
+    gauges, or A is too large to decompose densely. With ``vary``, an inconsistent
+    dependency is looked for again at the path varied (module docstring)."""
     model = problem.model
     rows = problem.constraint_rows(path) if model.constraints or model.end_count else None
     if rows is None or model.info.gauges or (~rows).sum() > DENSE_LIMIT:
@@ -160,8 +204,16 @@ def diagnose(problem, path: Path) -> ConstraintDiagnosis | None:
     weight = np.zeros(kept.size)
     weight[kept] = (U[:, weakest] ** 2).sum(axis=1)
     names, involved = _involved(model, weight)
-    return ConstraintDiagnosis(int(dependent.sum()), inconsistency, float(reach.max()),
-                               names, _motion(problem, path, involved, size))
+    found = ConstraintDiagnosis(int(dependent.sum()), inconsistency, float(reach.max()),
+                                names, _motion(problem, path, involved, size))
+    if vary and inconsistency > 0 and not model.end_count and not found.controlled:
+        try:
+            varied = diagnose(problem, problem.perturbed(path), vary=False)
+        except ValueError:          # the varied path leaves a retraction's chart
+            return found
+        return replace(found, degenerate=varied is None or varied.inconsistency == 0
+                       or varied.dependent < found.dependent)
+    return found
 
 
 def _involved(model, weight: np.ndarray) -> tuple[tuple[str, ...], list[int]]:
