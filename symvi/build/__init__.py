@@ -38,6 +38,7 @@ from ..discretisation.discretise import discretise
 from ..codegen.emit import CSource, emit, templates_digest
 from ..errors import BuildError, CacheWarning, CompilerNotFoundError, DamagedPackageError
 from .files import writing
+from .generic import generic_object
 from ..declaration.model import Model
 from .package import runtime_files, write_package
 from .stages import Expired, Progress, StageClock
@@ -283,8 +284,11 @@ def _compile(src: CSource, key: str, workdir: Path, clock: StageClock, verbose: 
     with writing(workdir, "create"):
         workdir.mkdir()
     try:
+        # the generic library at the small sources' flags whatever the model's size: it
+        # is compiled once for all models, and its loops are the solves' inner loops
+        generic = generic_object(workdir, COMPILE_ARGS, clock.remaining(), verbose)
         return compile_extension(src.cdef, (("model", src.c_source), *src.units),
                                  f"_ext_{key[:16]}", workdir, compile_args(src), clock.remaining(),
-                                 verbose)
+                                 verbose, objects=[generic])
     except CompileTimeout:
         raise Expired() from None

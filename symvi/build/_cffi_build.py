@@ -7,8 +7,10 @@ neither can disturb the caller's threads. Usage::
     python _cffi_build.py SPEC.json
 
 SPEC names the module, the file holding the cdef, the translation units (C files,
-compiled in parallel), the compile arguments and libraries, the build folder and the file
-to write the built extension's path into. Imports only the standard library and cffi (the
+compiled in parallel), the object files compiled before to link in, the compile arguments
+and libraries, the build folder and the file to write the built extension's path into;
+or, with ``objects_only``, the one unit to compile to an object file (the generic
+library) and the file to write that object's path into. Imports only the standard library and cffi (the
 script is run by path, not as part of the symvi package, so that SymPy is never imported).
 """
 import json
@@ -71,6 +73,11 @@ def compile_units(units: list[str], args: list[str], folder: str) -> list[str]:
 def main(spec_path: str) -> None:
     with open(spec_path) as handle:
         spec = json.load(handle)
+    if spec.get("objects_only"):    # object files to link later (the generic library)
+        objects = compile_units(spec["units"], spec["args"], spec["tmpdir"])
+        with open(spec["result"], "w") as handle:
+            handle.write(os.path.abspath(objects[0]))
+        return
     with open(spec["cdef"]) as cdef:
         declarations = cdef.read()
     units, objects = spec["units"], []
@@ -83,7 +90,7 @@ def main(spec_path: str) -> None:
     ffi = cffi.FFI()
     ffi.cdef(declarations)
     ffi.set_source(spec["module"], own, extra_compile_args=spec["args"],
-                   libraries=spec["libraries"], extra_objects=objects)
+                   libraries=spec["libraries"], extra_objects=objects + spec["link"])
     built = ffi.compile(tmpdir=spec["tmpdir"], verbose=spec["verbose"])
     with open(spec["result"], "w") as handle:
         handle.write(built)
