@@ -10,8 +10,9 @@ SPEC names the module, the file holding the cdef, the translation units (C files
 compiled in parallel), the object files compiled before to link in, the compile arguments
 and libraries, the build folder and the file to write the built extension's path into;
 or, with ``objects_only``, the one unit to compile to an object file (the generic
-library) and the file to write that object's path into. Imports only the standard library and cffi (the
-script is run by path, not as part of the symvi package, so that SymPy is never imported).
+library) and the file to write that object's path into. Imports only the standard
+library and cffi (the script is run by path, not as part of the symvi package, so that
+SymPy is never imported).
 """
 import json
 import os
