@@ -31,13 +31,15 @@ class CompileTimeout(Exception):
 
 def compile_extension(cdef: str, units: Sequence[tuple[str, str]], module: str,
                       workdir: Path, args: list[str], timeout: float | None = None,
-                      verbose: bool = False, objects: Sequence[Path] = ()) -> Path:
+                      verbose: bool = False, objects: Sequence[Path] = (),
+                      wrapper_args: list[str] | None = None) -> Path:
     """Build the cffi extension ``module`` in ``workdir``; return its path.
 
-    ``units`` are the translation units, (name, C text), compiled in parallel; ``cdef``
-    declares the functions they export (it is also the C of the extension's own unit,
-    which holds cffi's wrappers); ``objects`` are object files compiled before (the
-    generic library, :mod:`symvi.build.generic`), linked in.
+    ``units`` are the translation units, (name, C text), compiled in parallel with
+    ``args``; ``cdef`` declares the functions they export and is the C of the extension's
+    own unit, which holds cffi's wrappers, compiled with ``wrapper_args`` (default
+    ``args``); ``objects`` are object files compiled before (the generic library,
+    :mod:`symvi.build.generic`), linked in.
 
     Raises :class:`BuildError` with the compiler's output if compilation fails and
     :class:`CompileTimeout` if it runs longer than ``timeout`` seconds.
@@ -45,6 +47,7 @@ def compile_extension(cdef: str, units: Sequence[tuple[str, str]], module: str,
     workdir = Path(workdir).absolute()     # the child runs in it: relative paths would break
     spec = _write_inputs(cdef, units, module, workdir, args, verbose)
     spec["link"] = [str(Path(p).absolute()) for p in objects]
+    spec["wrapper_args"] = list(args if wrapper_args is None else wrapper_args)
     sources = ", ".join(f"{module}_{name}.c" for name, _ in units)
     return Path(_run_spec(spec, workdir, timeout, verbose, f"{module} ({sources})"))
 
@@ -88,13 +91,15 @@ def _write_inputs(cdef: str, units: Sequence[tuple[str, str]], module: str, work
                   args: list[str], verbose: bool) -> dict:
     cdef_path = workdir / "cdef.h"
     write_file(cdef_path, cdef)
-    paths = []
+    names = []
     for name, text in units:
-        paths.append(workdir / f"{module}_{name}.c")
-        write_file(paths[-1], text)
+        names.append(f"{module}_{name}.c")
+        write_file(workdir / names[-1], text)
+    # the units by their names in the child's working folder: the objects then record no
+    # path of the (randomly named) scratch folder, and the extension is reproducible
     return {"module": module, "args": list(args), "libraries": ["m"], "verbose": verbose,
             "tmpdir": str(workdir / "build"), "result": str(workdir / "built.txt"),
-            "cdef": str(cdef_path), "units": [str(p) for p in paths]}
+            "cdef": str(cdef_path), "units": names}
 
 
 def _run_child(command: list[str], workdir: Path, timeout: float | None) -> tuple[int, str]:
