@@ -45,6 +45,8 @@ import symvi.build.stages
 from symvi import Model
 from symvi.build import cache_key, compile_model, load
 from symvi.build.cache import MANIFEST, inspect
+from symvi.build.generic import CACHE_ENV, generic_key
+from symvi.codegen.emit import generic_source
 from symvi.cli import main
 from symvi.errors import BuildError, CacheWarning, DamagedPackageError
 from symvi.build.package import python_string
@@ -258,7 +260,11 @@ def test_import_time_hash_check_costs_little(pristine):
 
 
 # -- 4. threads of one process ---------------------------------------------------------------
-def test_threads_build_in_one_process_reproducibly(tmp_path, capfd):
+def test_threads_build_in_one_process_reproducibly(tmp_path, capfd, monkeypatch):
+    """...and build the generic library (symvi.build.generic) once between them: from an
+    empty cache, the first builds of all four threads want it at once."""
+    cache = tmp_path / "cache"
+    monkeypatch.setenv(CACHE_ENV, str(cache))
     model, cwd = tiny(), os.getcwd()
     capfd.readouterr()
     digests, failures = [], []
@@ -280,6 +286,8 @@ def test_threads_build_in_one_process_reproducibly(tmp_path, capfd):
         t.join()
     assert failures == []
     assert len(digests) == 8 and len(set(digests)) == 1     # bitwise-identical extensions
+    assert sorted(p.name for p in (cache / "generic").iterdir() if p.name != "lock") \
+        == [generic_key(generic_source(), FAST_ARGS)[:16]]      # one build, no scratch left
     assert os.getcwd() == cwd
     assert capfd.readouterr() == ("", "")                    # nothing on fds 1 and 2
 

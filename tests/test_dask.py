@@ -5,6 +5,7 @@ ones — trajectories bit for bit, solves to 1e-12."""
 from __future__ import annotations
 
 import re
+import shutil
 
 import numpy as np
 import pytest
@@ -13,6 +14,7 @@ distributed = pytest.importorskip("distributed")
 
 import symvi.dask  # noqa: E402
 from symvi.build import compile_model  # noqa: E402
+from symvi.build.generic import CACHE_ENV  # noqa: E402
 from symvi.models import get  # noqa: E402
 
 
@@ -24,8 +26,12 @@ def client():
         yield client
 
 
-def test_a_batch_on_two_worker_processes_is_the_local_batch(client, tmp_path):
-    module = compile_model(get("double_pendulum"), tmp_path, force=True)
+def test_a_batch_on_two_worker_processes_is_the_local_batch(client, tmp_path, monkeypatch):
+    """...from a package whose build cache is gone: the generic library (issue 54) is
+    inside its extension, which the workers load."""
+    monkeypatch.setenv(CACHE_ENV, str(tmp_path / "cache"))
+    module = compile_model(get("double_pendulum"), tmp_path / "out", force=True)
+    shutil.rmtree(tmp_path / "cache")
     rng = np.random.default_rng(24)
     start = module.State(x=rng.uniform(-1, 1, (100, 2)), v=rng.uniform(-1, 1, (100, 2)))
     lengths = rng.uniform(0.5, 2.0, 100)

@@ -35,7 +35,9 @@ CHILD = textwrap.dedent("""
         r = mod.integrate(spec["initial"], spec["n_steps"], spec["h"])
     print(json.dumps({"success": bool(r.success), "status": str(r.status),
                       "imported": imported, "after": parts(),
-                      "scipy": any(m.split(".")[0] == "scipy" for m in sys.modules)}))
+                      "scipy": any(m.split(".")[0] == "scipy" for m in sys.modules),
+                      "batch": mod.__name__ + "._runtime.step.batch" in sys.modules,
+                      "threads": "concurrent.futures" in sys.modules}))
 """)
 
 
@@ -67,6 +69,8 @@ def test_a_stepped_model_loads_neither_bvp_bounded_nor_scipy(build_dir, compiled
     assert out["success"], out
     assert out["imported"] == out["after"] == ["core", "step"], out
     assert not out["scipy"]
+    # nor the batch calls and their thread pool (issue 54: the first integrate's imports)
+    assert not out["batch"] and not out["threads"], out
 
 
 def test_a_bounded_model_loads_its_parts_on_its_first_solve(build_dir, compiled):

@@ -28,6 +28,7 @@ import sympy as sp
 import symvi
 from symvi import Model, PairGroupoid, State
 from symvi.build import MANIFEST, cache_key, compile_model
+from symvi.build.generic import CACHE_ENV
 from symvi.errors import CacheWarning
 from symvi.models import BUNDLED, get
 
@@ -269,6 +270,27 @@ def test_concurrent_compiles_into_same_directory(tmp_path):
     example = get(name).example
     out = run_standalone(tmp_path, name, example)
     assert out["success"], out["message"]
+
+
+def test_concurrent_compiles_build_the_generic_library_once(tmp_path):
+    """Three processes compile three models into three folders from an empty cache: the
+    generic library (symvi.build.generic) is built once, by whichever comes first, and
+    linked into all three packages, which run."""
+    cache = tmp_path / "cache"
+    env = child_env() | {CACHE_ENV: str(cache)}
+    names = ("harmonic_oscillator", "pendulum", "cubic_spline")
+    procs = [subprocess.Popen([*symvi_command(), "compile", name, "-o", str(tmp_path / name)],
+                              stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                              env=env)
+             for name in names]
+    results = [p.communicate(timeout=300) for p in procs]
+    for p, (out, err) in zip(procs, results):
+        assert p.returncode == 0, err
+    built = sorted(p.name for p in (cache / "generic").iterdir())
+    assert len(built) == 2 and "lock" in built, built       # one library, no scratch
+    for name in names:
+        out = run_standalone(tmp_path / name, name, get(name).example)
+        assert out["success"], out["message"]
 
 
 def test_interrupted_build_debris_does_not_break_compile_or_import(tmp_path):

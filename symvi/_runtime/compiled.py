@@ -14,7 +14,6 @@ from .core.model_info import Kernel, KernelInfo, ModelInfo, kernel_name
 from .core.options import SolveOptions, StepOptions
 from .core.paths import check_configured, held, increments, initial_layout
 from .core.results import State
-from .step.batch import integrate_many
 from .step.legendre import first_fibres, state_arrays
 from .step.stepping import integrate
 
@@ -35,13 +34,16 @@ def _documented_by(function: Callable) -> Callable:
 
 
 class _Solve:
-    """A method that forwards to a whole-trajectory function of ``bvp/`` (``module``'s
-    ``name``), imported on the first call or the first look at its signature or docstring
-    (then as :func:`_documented_by` gives them): a package whose model is only stepped never
-    imports ``bvp/``, ``bounded/`` or SciPy."""
+    """A method that forwards to a function of the run time (``module``'s ``name``): a
+    whole-trajectory function of ``bvp/``, or the batch of ``step/batch.py``, imported on
+    the first call or the first look at its signature or docstring (then as
+    :func:`_documented_by` gives them): a package whose model is only stepped never imports
+    ``bvp/``, ``bounded/`` or SciPy, and its first ``integrate`` not the batch's threads.
+    ``refuse`` (the model → None, or raises) runs before each call."""
 
-    def __init__(self, module: str, name: str):
+    def __init__(self, module: str, name: str, refuse: Callable | None = None):
         self._module, self.__name__, self.__qualname__ = module, name, f"CompiledModel.{name}"
+        self._refuse = refuse
 
     @property
     def function(self) -> Callable:
@@ -61,7 +63,16 @@ class _Solve:
         return self if model is None else types.MethodType(self, model)
 
     def __call__(self, model, *args, **options):
+        if self._refuse is not None:
+            self._refuse(model)
         return self.function(model, *args, **options)
+
+
+def _stepped(model: CompiledModel) -> None:
+    """Refuse a model with constraints (multipliers) in the step map's calls."""
+    if model.constraints:
+        raise ValueError(f"model {model.name!r} has constraints with multipliers; it is "
+                         f"solved as a whole trajectory: use solve_bvp")
 
 
 def result_labels(info: ModelInfo) -> dict:
@@ -238,18 +249,10 @@ class CompiledModel:
 
     @_documented_by(integrate)
     def integrate(self, initial, n_steps: int, h: float, params=None, **options):
-        if self.constraints:
-            raise ValueError(f"model {self.name!r} has constraints with multipliers; it is "
-                             f"solved as a whole trajectory: use solve_bvp")
+        _stepped(self)
         return integrate(self, initial, n_steps, h, params, **options)
 
-    @_documented_by(integrate_many)
-    def integrate_many(self, initial, n_steps: int, h, params=None, **options):
-        if self.constraints:
-            raise ValueError(f"model {self.name!r} has constraints with multipliers; it is "
-                             f"solved as a whole trajectory: use solve_bvp")
-        return integrate_many(self, initial, n_steps, h, params, **options)
-
+    integrate_many = _Solve(".step.batch", "integrate_many", _stepped)
     solve_bvp = _Solve(".bvp.bvp", "solve_bvp")
     solve_bvp_many = _Solve(".bvp.bvp_batch", "solve_bvp_many")
     continuation = _Solve(".bvp.bvp_batch", "continuation")

@@ -38,12 +38,13 @@ from ..discretisation.discretise import discretise
 from ..codegen.emit import CSource, emit, templates_digest
 from ..errors import BuildError, CacheWarning, CompilerNotFoundError, DamagedPackageError
 from .files import writing
+from .generic import generic_object
 from ..declaration.model import Model
 from .package import runtime_files, write_package
 from .stages import Expired, Progress, StageClock
 from .swap import Layout, ensure_folder
 
-__all__ = ["MANIFEST", "COMPILE_ARGS", "cache_key", "compile_model", "find_compiler", "load"]
+__all__ = ["MANIFEST", "COMPILE_ARGS", "WRAPPER_ARGS", "cache_key", "compile_model", "find_compiler", "load"]
 
 #: Flags of the C compile (part of the cache key). ``-g0`` keeps the extension free of
 #: debug information, which would record the (randomly named) build folder: the same
@@ -59,8 +60,16 @@ COMPILE_ARGS = ["-O3", "-std=c99", "-fno-math-errno", "-g0"]
 #: Superword vectorisation is off for them: on straight-line kernels it finds little and
 #: costs much (20-link chain, kernels split by ``codegen/schedule.py``: 11.5 s and 400 MB
 #: with it, 9.1 s and 280 MB without; the 10-link chain's loop is as fast).
-LARGE_SOURCE = 150_000
+#: Lowered from 150 000 when the generic library (issue 54, :mod:`.generic`) took 7 kB
+#: (band solvers) to 17 kB (and the lifted inertia) out of every whole-trajectory model's
+#: unit: the bundled models compiled at -O2 are those of before but heavy_top_rotors_oc
+#: (154 → 137 kB), now at -O3.
+LARGE_SOURCE = 142_000
 LARGE_SOURCE_ARGS = ["-O2", "-fno-tree-slp-vectorize", *COMPILE_ARGS[1:]]
+#: Flags of the unit of cffi's wrappers (argument conversions, no arithmetic of the
+#: model's), compiled apart from the model's units (issue 54): at -O3, pendulum's 40
+#: wrappers cost 0.67 s of CPU, two thirds of its C compile; at -O1 0.29 s.
+WRAPPER_ARGS = ["-O1", "-std=c99", "-g0"]
 
 
 def compile_args(src: CSource) -> list[str]:
@@ -86,6 +95,7 @@ def cache_key(model: Model) -> str:
       command line, the bundled model files and the build's own orchestration, lock and
       swap (:func:`~symvi.build.cache.generating_sources`);
     * the compile: :data:`COMPILE_ARGS` and the large-source rule (:func:`compile_args`),
+      :data:`WRAPPER_ARGS`,
       the compiler cffi would run and the flags
       setuptools adds (:func:`~symvi.build.cache.compiler_identity`), Python's extension
       suffix (its ABI), and the versions of SymPy (simplifies and prints the C),
@@ -112,7 +122,8 @@ def _key_parts(model: Model) -> list[tuple[str, str]]:
         ("templates", templates_digest()),
         ("runtime", files_digest(runtime_files())),
         ("sources", sources_digest(c.__module__ for c in classes)),
-        ("compile args", "\0".join(COMPILE_ARGS + [str(LARGE_SOURCE)] + LARGE_SOURCE_ARGS)),
+        ("compile args", "\0".join(COMPILE_ARGS + [str(LARGE_SOURCE)] + LARGE_SOURCE_ARGS
+                                   + WRAPPER_ARGS)),
         ("compiler", compiler_identity()),
         ("python", str(sysconfig.get_config_var("EXT_SUFFIX"))),
         ("libraries", library_versions()),
@@ -283,8 +294,11 @@ def _compile(src: CSource, key: str, workdir: Path, clock: StageClock, verbose: 
     with writing(workdir, "create"):
         workdir.mkdir()
     try:
+        # the generic library at the small sources' flags whatever the model's size: it
+        # is compiled once for all models, and its loops are the solves' inner loops
+        generic = generic_object(workdir, COMPILE_ARGS, clock.remaining(), verbose)
         return compile_extension(src.cdef, (("model", src.c_source), *src.units),
                                  f"_ext_{key[:16]}", workdir, compile_args(src), clock.remaining(),
-                                 verbose)
+                                 verbose, objects=[generic], wrapper_args=WRAPPER_ARGS)
     except CompileTimeout:
         raise Expired() from None

@@ -7,9 +7,13 @@ neither can disturb the caller's threads. Usage::
     python _cffi_build.py SPEC.json
 
 SPEC names the module, the file holding the cdef, the translation units (C files,
-compiled in parallel), the compile arguments and libraries, the build folder and the file
-to write the built extension's path into. Imports only the standard library and cffi (the
-script is run by path, not as part of the symvi package, so that SymPy is never imported).
+compiled in parallel), the object files compiled before to link in, the compile arguments
+of the units and of cffi's wrappers (a unit of their own) and the libraries, the build
+folder and the file to write the built extension's path into;
+or, with ``objects_only``, the one unit to compile to an object file (the generic
+library) and the file to write that object's path into. Imports only the standard
+library and cffi (the script is run by path, not as part of the symvi package, so that
+SymPy is never imported).
 """
 import json
 import os
@@ -71,19 +75,20 @@ def compile_units(units: list[str], args: list[str], folder: str) -> list[str]:
 def main(spec_path: str) -> None:
     with open(spec_path) as handle:
         spec = json.load(handle)
+    if spec.get("objects_only"):    # object files to link later (the generic library)
+        objects = compile_units(spec["units"], spec["args"], spec["tmpdir"])
+        with open(spec["result"], "w") as handle:
+            handle.write(os.path.abspath(objects[0]))
+        return
     with open(spec["cdef"]) as cdef:
         declarations = cdef.read()
-    units, objects = spec["units"], []
-    if len(units) == 1:     # one unit: it is the extension's own, with cffi's wrappers
-        with open(units[0]) as source:
-            own = source.read()
-    else:                   # several: compiled side by side, the wrappers in a unit of
-        objects = compile_units(units, spec["args"], os.path.join(spec["tmpdir"], "units"))
-        own = declarations  # their own (the prototypes of the functions they call)
+    # the model's units compiled side by side, cffi's wrappers in a unit of their own
+    # (the prototypes of the functions they call) with flags of their own
+    objects = compile_units(spec["units"], spec["args"], os.path.join(spec["tmpdir"], "units"))
     ffi = cffi.FFI()
     ffi.cdef(declarations)
-    ffi.set_source(spec["module"], own, extra_compile_args=spec["args"],
-                   libraries=spec["libraries"], extra_objects=objects)
+    ffi.set_source(spec["module"], declarations, extra_compile_args=spec["wrapper_args"],
+                   libraries=spec["libraries"], extra_objects=objects + spec["link"])
     built = ffi.compile(tmpdir=spec["tmpdir"], verbose=spec["verbose"])
     with open(spec["result"], "w") as handle:
         handle.write(built)

@@ -42,7 +42,7 @@ SYMVI = Path(__file__).resolve().parent.parent
 #: stages, the package writer, the C compile and the script it runs in a child process,
 #: and the groupoid classes, whose methods give a model its C context.
 PIPELINE = ("symvi.discretisation.discretise", "symvi.derivation.derive", "symvi.codegen.emit",
-            "symvi.build.package",
+            "symvi.build.package", "symvi.build.generic",
             "symvi.build.ccompile", "symvi.build._cffi_build", "symvi.groupoids")
 #: Packages and modules whose code never reaches a generated file: the import closure
 #: does not enter them. The checks read models and never build them; the bundled model

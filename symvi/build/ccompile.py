@@ -31,47 +31,75 @@ class CompileTimeout(Exception):
 
 def compile_extension(cdef: str, units: Sequence[tuple[str, str]], module: str,
                       workdir: Path, args: list[str], timeout: float | None = None,
-                      verbose: bool = False) -> Path:
+                      verbose: bool = False, objects: Sequence[Path] = (),
+                      wrapper_args: list[str] | None = None) -> Path:
     """Build the cffi extension ``module`` in ``workdir``; return its path.
 
-    ``units`` are the translation units, (name, C text), compiled in parallel; ``cdef``
-    declares the functions they export (it is also the C of the extension's own unit,
-    which holds cffi's wrappers).
+    ``units`` are the translation units, (name, C text), compiled in parallel with
+    ``args``; ``cdef`` declares the functions they export and is the C of the extension's
+    own unit, which holds cffi's wrappers, compiled with ``wrapper_args`` (default
+    ``args``); ``objects`` are object files compiled before (the generic library,
+    :mod:`symvi.build.generic`), linked in.
 
     Raises :class:`BuildError` with the compiler's output if compilation fails and
     :class:`CompileTimeout` if it runs longer than ``timeout`` seconds.
     """
+    workdir = Path(workdir).absolute()     # the child runs in it: relative paths would break
+    spec = _write_inputs(cdef, units, module, workdir, args, verbose)
+    spec["link"] = [str(Path(p).absolute()) for p in objects]
+    spec["wrapper_args"] = list(args if wrapper_args is None else wrapper_args)
+    sources = ", ".join(f"{module}_{name}.c" for name, _ in units)
+    return Path(_run_spec(spec, workdir, timeout, verbose, f"{module} ({sources})"))
+
+
+def compile_object(source: str, name: str, workdir: Path, args: list[str],
+                   timeout: float | None = None, verbose: bool = False) -> Path:
+    """Compile the C text ``source`` to the object file ``name``.o (position-independent,
+    with the compiler and flags of the extensions it will be linked into) in ``workdir``;
+    its path. Errors as :func:`compile_extension`'s."""
+    workdir = Path(workdir).absolute()
+    write_file(workdir / f"{name}.c", source)
+    # the source by its name in the child's working folder: the object then records no
+    # path of the (randomly named) folder it was compiled in
+    spec = {"objects_only": True, "args": list(args), "verbose": verbose,
+            "tmpdir": str(workdir / "build"), "result": str(workdir / "built.txt"),
+            "units": [f"{name}.c"]}
+    return Path(_run_spec(spec, workdir, timeout, verbose, f"{name}.c"))
+
+
+def _run_spec(spec: dict, workdir: Path, timeout: float | None, verbose: bool,
+              what: str) -> str:
+    """Run the child on ``spec`` (written into ``workdir``); the text it leaves in the
+    spec's result file (the path of what it built)."""
     if not sys.executable:
         raise BuildError("cannot run the C compile: the path of the Python interpreter "
                          "(sys.executable) is unknown")
-    workdir = Path(workdir).absolute()     # the child runs in it: relative paths would break
-    spec = _write_inputs(cdef, units, module, workdir, args, verbose)
-    returncode, output = _run_child([sys.executable, "-c", _BOOTSTRAP, str(_CHILD), str(spec)],
+    path = workdir / "spec.json"
+    write_file(path, json.dumps(spec))
+    returncode, output = _run_child([sys.executable, "-c", _BOOTSTRAP, str(_CHILD), str(path)],
                                     workdir, timeout)
     if verbose and output:
         print(output, file=sys.stderr, end="" if output.endswith("\n") else "\n")
-    result = workdir / "built.txt"
+    result = Path(spec["result"])
     if returncode != 0 or not result.is_file():
-        sources = ", ".join(f"{module}_{name}.c" for name, _ in units)
-        raise BuildError(f"the C compile of {module} ({sources}) failed (exit status "
+        raise BuildError(f"the C compile of {what} failed (exit status "
                          f"{returncode})\n--- compiler output ---\n{output.strip()}")
-    return Path(result.read_text())
+    return result.read_text()
 
 
 def _write_inputs(cdef: str, units: Sequence[tuple[str, str]], module: str, workdir: Path,
-                  args: list[str], verbose: bool) -> Path:
+                  args: list[str], verbose: bool) -> dict:
     cdef_path = workdir / "cdef.h"
     write_file(cdef_path, cdef)
-    paths = []
+    names = []
     for name, text in units:
-        paths.append(workdir / f"{module}_{name}.c")
-        write_file(paths[-1], text)
-    spec = {"module": module, "args": list(args), "libraries": ["m"], "verbose": verbose,
+        names.append(f"{module}_{name}.c")
+        write_file(workdir / names[-1], text)
+    # the units by their names in the child's working folder: the objects then record no
+    # path of the (randomly named) scratch folder, and the extension is reproducible
+    return {"module": module, "args": list(args), "libraries": ["m"], "verbose": verbose,
             "tmpdir": str(workdir / "build"), "result": str(workdir / "built.txt"),
-            "cdef": str(cdef_path), "units": [str(p) for p in paths]}
-    path = workdir / "spec.json"
-    write_file(path, json.dumps(spec))
-    return path
+            "cdef": str(cdef_path), "units": names}
 
 
 def _run_child(command: list[str], workdir: Path, timeout: float | None) -> tuple[int, str]:

@@ -203,6 +203,13 @@ def _with_configuration_offsets(groups: Sequence[GroupFactor]) -> list[GroupFact
     return out
 
 
+def generic_source() -> str:
+    """The C of the generic library (``templates/generic.c.j2``): the band factorisation,
+    solves and products and the lifted system's inertia and equilibration, which depend on
+    no model; compiled once and linked into every package (:mod:`symvi.build.generic`)."""
+    return environment().get_template("generic.c.j2").render()
+
+
 def templates_digest() -> str:
     """Content hash of every template (part of the build cache key)."""
     h = hashlib.sha256()
