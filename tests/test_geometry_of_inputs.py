@@ -132,3 +132,25 @@ def test_few_steps_give_a_status_or_a_named_error(compiled, name):
         result = mod.solve_bvp(ex.start, ex.end, N, ex.h)
         assert isinstance(result.status, mod.Status) and result.message
         assert "use fewer steps" not in result.message, result.message   # it needs more
+
+
+def test_group_conditions_are_described_for_any_group():
+    """The conditions a configuration must meet are named by what they are (an invariant
+    co-form, an invariant covector), with SE(n)'s reading beside (a hunt: a custom
+    Heisenberg group's check spoke of 'the rotation block'): the Heisenberg group of
+    upper unitriangular 3×3 matrices fixes e₁ and the covector e₃ᵀ."""
+    import sympy as sp
+    from symvi import MatrixLieGroup
+    from symvi._runtime.core.geometry import group_defects
+    E = [sp.zeros(3) for _ in range(3)]
+    E[0][0, 1], E[1][1, 2], E[2][0, 2] = 1, 1, 1
+    heisenberg = MatrixLieGroup(E, "a b c", "H3")
+    off = np.eye(3)
+    off[2, 0] = 0.5                                 # below the diagonal: off the group
+    defects, conditions = group_defects(off[None], heisenberg.invariants())
+    violated = [c for c, d in zip(conditions, defects[0]) if d > 1e-12]
+    assert "gKgᵀ = K (an invariant co-form: on SE(n) the rotation block's orthogonality)" \
+        in violated
+    assert "wᵀg = wᵀ for w = [0.0, 0.0, 1.0] (an invariant covector: on SE(n) the last row)" \
+        in violated
+    assert "g v = v for v = [1.0, 0.0, 0.0]" in violated

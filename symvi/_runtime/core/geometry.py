@@ -49,11 +49,11 @@ def group_defects(gs: np.ndarray, invariants: dict) -> tuple[np.ndarray, list[st
                      "gᵀJg = J (an invariant quadratic form)")
         for K in map(np.asarray, invariants["coquadratic"]):
             consider(gs @ K @ T - K, a @ np.abs(K) @ np.swapaxes(a, 1, 2),
-                     "gKgᵀ = K (orthogonality of the rotation block)")
+                     "gKgᵀ = K (an invariant co-form: on SE(n) the rotation block's orthogonality)")
         for v in map(np.asarray, invariants["fixed"]):
             consider(gs @ v - v, a @ np.abs(v), f"g v = v for v = {v.tolist()}")
         for w in map(np.asarray, invariants["cofixed"]):
-            consider(w @ gs - w, np.abs(w) @ a, f"wᵀg = wᵀ for w = {w.tolist()} (the last row)")
+            consider(w @ gs - w, np.abs(w) @ a, f"wᵀg = wᵀ for w = {w.tolist()} (an invariant covector: on SE(n) the last row)")
         det = np.linalg.det(gs)
         columns.append(np.where(det > 0.0, 0.0, np.where(np.isfinite(det), 1.0 + np.abs(det),
                                                            np.inf)))
