@@ -430,7 +430,7 @@ class Groupoid(ABC):
         (those a group acting on itself holds in g may be left out) and configurations
         on their groups; or ``order`` nodes — base points (r, m), configurations
         (r, d, d) per group factor, or both as (x, g) — their configurations on their
-        groups. Checked when a model is declared, before any build; the run time checks
+        groups (MatrixLieGroup.check_configurations). Checked when a model is declared, before any build; the run time checks
         the same data again, with its parameters."""
         m, groups = self.source_dim, self.matrix_groups()
         if all(hasattr(value, a) for a in ("v", "x", "g")):
@@ -443,8 +443,9 @@ class Groupoid(ABC):
                 _shape(value.x, (m,), f"the {what} state's position x")
             blocks = [] if value.g is None else [value.g] if len(groups) == 1 else list(value.g)
             for G, g in zip(groups, blocks):
-                G.check_configuration(np.asarray(g, dtype=float), f"the {what} state's "
-                                      f"configuration g")
+                _shape(g, (G.matrix_dim, G.matrix_dim), f"the {what} state's configuration g")
+                G.check_configurations(np.asarray(g, dtype=float)[None],
+                                       f"the {what} state's configuration g")
             return
         pair = isinstance(value, (tuple, list)) and len(value) == 2 \
             and np.ndim(value[0]) == 2 and np.ndim(value[1]) >= 3
@@ -455,8 +456,7 @@ class Groupoid(ABC):
         blocks = [] if g is None else [g] if len(groups) == 1 else list(g)
         for G, nodes in zip(groups, blocks):
             _shape(nodes, (order, G.matrix_dim, G.matrix_dim), f"the {what} configurations")
-            for k, node in enumerate(np.asarray(nodes, dtype=float)):
-                G.check_configuration(node, f"the {what} configuration {k}")
+            G.check_configurations(np.asarray(nodes, dtype=float), f"the {what} configuration")
 
     def configuration_base(self) -> tuple[int, ...]:
         """Per base coordinate, the row-major index into the node's flat configuration g

@@ -23,6 +23,7 @@ from typing import Sequence
 import numpy as np
 import sympy as sp
 
+from .._runtime.core.groups import TOLERANCE, group_defects
 from ..errors import ModelError
 from ..discretisation.rules import LIE, LIE_MIDPOINT, MAX_ORDER, lie_central, window_derivatives
 from . import analytic
@@ -129,26 +130,20 @@ class MatrixLieGroup(Groupoid):
                 "fixed": kernel(self.basis),
                 "cofixed": kernel([E.T for E in self.basis])}
 
-    def check_configuration(self, g: np.ndarray, what: str, tol: float = 1e-9) -> None:
-        """Raise ModelError unless ``g`` is a finite d×d matrix on the group, as far as
-        :meth:`invariants` cut it out (gᵀJg = J, gKgᵀ = K, gv = v, wᵀg = wᵀ, det g > 0)
-        to ``tol`` relative to g's size."""
+    def check_configurations(self, gs: np.ndarray, what: str) -> None:
+        """Raise ModelError unless every matrix of ``gs`` (K, d, d) is finite and on the
+        group: the run time's own test of the same data (``_runtime/core/groups.py``,
+        the conditions of :meth:`invariants` within its relative tolerance)."""
         d = self.matrix_dim
-        _shape(g, (d, d), what)
-        if not np.isfinite(g).all():
-            raise ModelError(f"{what} is not finite")
-        scale = 1.0 + float(np.abs(g).max())
-        invariants = self.invariants()
-        defects = [np.abs(g.T @ np.array(J) @ g - np.array(J)).max()
-                   for J in invariants["quadratic"]] \
-            + [np.abs(g @ np.array(K) @ g.T - np.array(K)).max()
-               for K in invariants["coquadratic"]] \
-            + [np.abs(g @ np.array(v) - np.array(v)).max() for v in invariants["fixed"]] \
-            + [np.abs(np.array(w) @ g - np.array(w)).max() for w in invariants["cofixed"]]
-        worst = max(defects, default=0.0)
-        if worst > tol * scale ** 2 or np.linalg.det(g) <= 0:
-            raise ModelError(f"{what} is not on {self.label} (its defect is {worst:.1e}, "
-                             f"det {np.linalg.det(g):.3g})")
+        _shape(gs, (len(gs), d, d), what)
+        defects, conditions = group_defects(gs, self.invariants())
+        for k, row in enumerate(defects):
+            worst = int(np.argmax(row)) if len(conditions) else 0
+            if len(conditions) and not row[worst] <= TOLERANCE:
+                node = f" (node {k})" if len(gs) > 1 else ""
+                raise ModelError(f"{what}{node} is not on {self.label}: {conditions[worst]} "
+                                 f"fails by {row[worst]:.3e} (tolerance {TOLERANCE:g}, "
+                                 f"relative)")
 
     def _closure(self):
         n, constants = len(self.basis), {}

@@ -55,7 +55,7 @@ from .assembly import Problem
 from . import boundary_states
 from .band import factor, lu_solve, rounding_level
 from ..core.model_info import Kernel
-from ..core.paths import Path, fibres, flat_configurations
+from ..core.paths import Path, fibres
 
 #: Central differences in T at this relative step (ε^⅓: truncation and rounding balanced).
 DIFFERENCE = np.finfo(float).eps ** (1.0 / 3.0)
@@ -179,15 +179,10 @@ class HorizonProblem(Problem):
         for state, which, nodes in ((self.states[0], "start", slice(0, 2)),
                                     (self.states[1], "end", slice(-2, None))):
             try:
-                value = boundary_states.element_nodes(self.model, state, h_ends, self.p, which)
+                moved.x[nodes], moved.g[nodes] = boundary_states.element(
+                    self.model, state, h_ends, self.p, which)
             except ValueError:
                 return None
-            m, groups = self.model.m, bool(self.model.matrix_dims)
-            x, g = (value if m and groups else (value, None) if m else (None, value))
-            if m:
-                moved.x[nodes] = x
-            if groups:
-                moved.g[nodes] = flat_configurations(self.model, g, 2, "end nodes")
         for nodes, elements in ((slice(0, 3), slice(0, 2)), (slice(-3, None), slice(-2, None))):
             f = fibres(self.model, np.ascontiguousarray(moved.x[nodes]),
                        np.ascontiguousarray(moved.g[nodes]), self.p, h, lambda k: "an end element")

@@ -25,8 +25,7 @@ import numpy as np
 
 from ..core import arguments
 from ..core.geometry import check_base_points, check_configurations
-from ..core.model_info import Kernel
-from ..core.paths import check_configured, held, node_velocities
+from ..core.paths import check_configured, held, held_base_points, node_velocities
 from ..core.results import BVPResult, State
 
 
@@ -51,10 +50,19 @@ def check_supported(model) -> None:
 
 
 def element_nodes(model, state: State, h: float, p: np.ndarray, what: str):
-    """The two nodes of the element whose midpoint is ``state``, in the layout of
-    :func:`.bvp.solve_bvp`'s ``start``/``end``: the state's node moved by the node
-    variations τ(∓hv/2) — x ∓ hv/2 on a pair factor, g τ(∓hξ/2) on a group factor, the
-    base point of an action groupoid by the action (which keeps it on its manifold)."""
+    """The two nodes of the element whose midpoint is ``state`` (:func:`element`), in the
+    layout of :func:`.bvp.solve_bvp`'s ``start``/``end``."""
+    x, g = element(model, state, h, p, what)
+    if not model.matrix_dims:
+        return x
+    return model.configurations(g) if model.m == 0 else (x, model.configurations(g))
+
+
+def element(model, state: State, h: float, p: np.ndarray, what: str):
+    """(base points (2, m), flat configurations (2, Σd²)) of the two nodes of the element
+    whose midpoint is ``state``: the state's node moved by the node variations τ(∓hv/2) —
+    x ∓ hv/2 on a pair factor, g τ(∓hξ/2) on a group factor, the base point of an action
+    groupoid by the action (which keeps it on its manifold)."""
     v = arguments.finite_array(state.v, (model.n,), f"the {what} state's velocity v")
     x, g = _node(model, state, what)
     # the element's increment τ(hξ) within the chart (exp: an angle below π), which the
@@ -66,20 +74,18 @@ def element_nodes(model, state: State, h: float, p: np.ndarray, what: str):
         raise ValueError(f"the {what} state's velocity is outside the retraction's chart at "
                          f"h = {h:g} (Cayley: a half-turn; exp: an angle ≥ π per step); "
                          f"take more steps")
-    x, g = (np.concatenate(pair) for pair in zip(first, second))
-    if not model.matrix_dims:
-        return x
-    return model.configurations(g) if model.m == 0 else (x, model.configurations(g))
+    return tuple(np.concatenate(pair) for pair in zip(first, second))
 
 
 def _node(model, state: State, what: str) -> tuple[np.ndarray, np.ndarray]:
     """The state's position as one node (x, flat g), checked on its manifold and group;
     a group acting on itself takes its base point from the configuration."""
-    g = model.configuration(state.g, f"the {what} state's configuration g")
+    g = np.zeros(0)
     if model.matrix_dims:
+        g = model.configuration(state.g, f"the {what} state's configuration g")
         check_configurations(model, g[None], f"the {what} state's configuration g")
     if model.m and state.x is None and held(model):
-        x = g[np.asarray(model.info.configuration_base, dtype=int)]
+        x = held_base_points(model, g)
     else:
         x = arguments.finite_array(state.x, (model.m,), f"the {what} state's position x") \
             if model.m else np.zeros(0)

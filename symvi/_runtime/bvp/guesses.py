@@ -30,7 +30,7 @@ def converted(model, guess, N: int, h: float, p: np.ndarray, from_states: bool):
     guess as it is. ``N`` counts the elements (from States, N + 1 of them)."""
     if isinstance(guess, BVPResult) and guess.f is not None and _steps(guess) != N:
         return _resampled(model, guess, N, p, from_states)
-    if callable(guess) and not isinstance(guess, (BVPResult, Resampled, np.ndarray)):
+    if callable(guess):
         return _from_function(model, guess, N, h, from_states)
     return guess
 

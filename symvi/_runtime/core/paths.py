@@ -86,6 +86,12 @@ def held(model) -> bool:
     return bool(base) and min(base) >= 0
 
 
+def held_base_points(model, g: np.ndarray) -> np.ndarray:
+    """The base points a group acting on itself holds in its flat configurations ``g``
+    (one node, or nodes along the first axis): their entries (:func:`held`)."""
+    return g[..., list(model.info.configuration_base)]
+
+
 def _axes(value) -> int:
     """The number of array axes of ``value``; a sequence of arrays of different shapes
     (one per group factor: SE(2)'s 3×3 and SE(3)'s 4×4) has one more than its fewest."""
@@ -139,7 +145,7 @@ def _parse_nodes(model, value, count: int, what: str) -> tuple[np.ndarray, np.nd
         return arguments.finite_array(value, (count, m), f"{what} nodes"), np.zeros((count, 0))
     if m == 0 or _configured(model, value):
         g = flat_configurations(model, value, count, f"{what} configurations")
-        return g[:, list(model.info.configuration_base)], g
+        return held_base_points(model, g), g
     try:
         x, g = value
     except (TypeError, ValueError):
@@ -403,7 +409,7 @@ def _read_elements(model, initial) -> tuple[np.ndarray, np.ndarray]:
     if model.matrix_dims:
         check_configurations(model, g0[None, :], "initial configuration g_0")
     if alone:
-        x0 = g0[list(model.info.configuration_base)]
+        x0 = held_base_points(model, g0)
     x0 = arguments.finite_array(x0, (m,), "initial base point x_0")
     check_base_points(model, x0[None, :], "initial base point x_0")
     check_configured(model, x0[None, :], g0[None, :], "initial", 0,
